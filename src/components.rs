@@ -1,0 +1,340 @@
+//! Components carried by marbles and boards.
+//!
+//! A marble is an entity with [`Marble`]; its `#[require]` list brings every other
+//! component it needs with a documented default, so `commands.spawn((Marble,
+//! Position(p)))` is a complete 8 mm glass marble. A board is an entity with [`Board`]
+//! and a [`Collider`]; boards are kinematic: they move marbles, marbles never move them.
+//!
+//! All quantities are SI: metres, seconds, kilograms, radians.
+
+use bevy_ecs::prelude::*;
+use glam::{Quat, Vec3};
+
+use crate::geometry::BoardGeometry;
+
+/// Default marble radius: 8 mm, a common glass marble.
+pub const DEFAULT_RADIUS: f32 = 0.008;
+/// Density of glass, kg/m³, used for the default marble mass.
+pub const GLASS_DENSITY: f32 = 2500.0;
+
+macro_rules! vec3_newtype {
+    ($(#[$doc:meta])* $name:ident) => {
+        $(#[$doc])*
+        #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+        pub struct $name(pub Vec3);
+
+        impl core::ops::Deref for $name {
+            type Target = Vec3;
+            fn deref(&self) -> &Vec3 {
+                &self.0
+            }
+        }
+
+        impl core::ops::DerefMut for $name {
+            fn deref_mut(&mut self) -> &mut Vec3 {
+                &mut self.0
+            }
+        }
+    };
+}
+
+vec3_newtype!(
+    /// World position, metres. For a marble, its centre; for a board, the origin of its
+    /// local frame (and its centre of rotation).
+    Position
+);
+vec3_newtype!(
+    /// Linear velocity, m/s. Marbles: integrated from forces. Boards: kinematic, constant
+    /// unless a program changes it.
+    Velocity
+);
+vec3_newtype!(
+    /// Force on a marble, newtons, accumulated by user systems before the physics step and
+    /// cleared after the step (all substeps) has integrated it. Gravity is not stored
+    /// here: it comes from [`crate::config::StepConfig::gravity`].
+    Force
+);
+vec3_newtype!(
+    /// Angular velocity of a board, rad/s, world frame, about its [`Position`]. A board's
+    /// surface point `p` moves at `velocity + angular_velocity × (p − position)`.
+    AngularVelocity
+);
+vec3_newtype!(
+    /// Acceleration of a marble this step, m/s²: gravity plus `Force / mass`. Written by
+    /// the force stage, read by integration and response; internal but readable.
+    Acceleration
+);
+
+/// Orientation of a board (unit quaternion, local → world).
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct Rotation(pub Quat);
+
+impl Default for Rotation {
+    fn default() -> Self {
+        Rotation(Quat::IDENTITY)
+    }
+}
+
+/// Marks a marble: a solid sphere moved by forces and contacts.
+#[derive(Component, Clone, Copy, Debug, Default)]
+#[require(
+    Position,
+    Velocity,
+    Force,
+    Acceleration,
+    Radius,
+    Mass,
+    Restitution,
+    Friction,
+    StepStart,
+    Contacts
+)]
+pub struct Marble;
+
+/// Marks a board: a kinematic body with a [`Collider`] shape.
+#[derive(Component, Clone, Copy, Debug, Default)]
+#[require(
+    Position,
+    Rotation,
+    Velocity,
+    AngularVelocity,
+    Restitution,
+    Friction
+)]
+pub struct Board;
+
+/// A board's shape (parry3d shapes behind a shared pointer, cheap to clone).
+#[derive(Component, Clone, Debug)]
+pub struct Collider(pub std::sync::Arc<BoardGeometry>);
+
+impl Collider {
+    /// Wraps a geometry.
+    pub fn new(geometry: BoardGeometry) -> Self {
+        Collider(std::sync::Arc::new(geometry))
+    }
+}
+
+/// Marble radius, metres, > 0. Default 8 mm.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct Radius(pub f32);
+
+impl Default for Radius {
+    fn default() -> Self {
+        Radius(DEFAULT_RADIUS)
+    }
+}
+
+/// Marble mass, kg, with its inverse stored beside it (the response divides by mass).
+///
+/// The default is a glass sphere of the default radius (5.36 g). Spawn a marble of another
+/// radius with [`Mass::glass`] or [`Mass::new`].
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct Mass {
+    mass: f32,
+    inverse: f32,
+}
+
+impl Mass {
+    /// A mass of `mass` kg. Panics in debug builds unless `mass` is finite and > 0 (scene
+    /// loading validates it first and reports an error instead).
+    pub fn new(mass: f32) -> Self {
+        debug_assert!(mass.is_finite() && mass > 0.0, "mass must be > 0, got {mass}");
+        Mass {
+            mass,
+            inverse: 1.0 / mass,
+        }
+    }
+
+    /// The mass of a solid glass sphere (2500 kg/m³) of the given radius.
+    pub fn glass(radius: f32) -> Self {
+        Mass::new(Mass::glass_mass(radius))
+    }
+
+    /// The mass, kg, of a solid glass sphere (2500 kg/m³) of the given radius.
+    pub fn glass_mass(radius: f32) -> f32 {
+        GLASS_DENSITY * 4.0 / 3.0 * core::f32::consts::PI * radius.powi(3)
+    }
+
+    /// Mass, kg.
+    pub fn get(&self) -> f32 {
+        self.mass
+    }
+
+    /// Inverse mass, 1/kg.
+    pub fn inverse(&self) -> f32 {
+        self.inverse
+    }
+}
+
+impl Default for Mass {
+    fn default() -> Self {
+        Mass::glass(DEFAULT_RADIUS)
+    }
+}
+
+/// Coefficient of restitution in [0, 1]: the ratio of separating to approaching normal
+/// speed in a collision. A pair uses the average of its two parties' values. Default 0.5.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct Restitution(pub f32);
+
+impl Default for Restitution {
+    fn default() -> Self {
+        Restitution(0.5)
+    }
+}
+
+/// Coulomb friction coefficient ≥ 0, used when rolling is modelled. A pair uses the
+/// average of its two parties' values. Default 0.5.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct Friction(pub f32);
+
+impl Default for Friction {
+    fn default() -> Self {
+        Friction(0.5)
+    }
+}
+
+/// A marble's state at the start of the current substep, before forces were integrated.
+/// Written by the integration stage; detection measures closing speeds against it.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepStart {
+    /// Centre at the start of the substep, m.
+    pub position: Vec3,
+    /// Velocity at the start of the substep, before this step's forces, m/s.
+    pub velocity: Vec3,
+}
+
+/// Whether a touching pair was an impact or a touch.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum ContactKind {
+    /// Closing speed above `restitution_threshold`: the seed's equation (1) was applied.
+    Collision,
+    /// Touching, resting, or sliding: approaching normal velocity was removed (e = 0).
+    #[default]
+    Contact,
+}
+
+/// One marble–board contact found during the last substep.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Contact {
+    /// The board touched.
+    pub board: Entity,
+    /// Contact point on the board's surface, world frame, m.
+    pub point: Vec3,
+    /// Unit normal out of the board's surface, towards the marble.
+    pub normal: Vec3,
+    /// Penetration depth, m (≤ 0 means a gap within the touching tolerance).
+    pub depth: f32,
+    /// Normal closing speed `(v_m − v_b(p))·n` when the contact was classified, m/s
+    /// (negative: approaching).
+    pub closing_speed: f32,
+    /// Collision or contact.
+    pub kind: ContactKind,
+    /// When in the substep it was found, s from the substep's start.
+    pub time: f32,
+    /// Which convex piece of the board (internal identifier; stable within a substep).
+    pub piece: crate::geometry::PieceId,
+}
+
+/// How many contacts a marble keeps per substep. A marble in a box corner touches three
+/// boards; further contacts are still resolved, only not recorded.
+pub const MAX_CONTACTS: usize = 4;
+
+/// The contacts of a marble during the last substep (fixed capacity, no allocation).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct Contacts {
+    list: [Contact; MAX_CONTACTS],
+    len: u8,
+    /// Set by detection when the response stage must resolve this marble.
+    pub(crate) pending: Pending,
+}
+
+/// What detection left for the response stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) enum Pending {
+    /// Free motion stands.
+    #[default]
+    None,
+    /// Touches at the substep's start (recorded in the list).
+    Touching,
+    /// First impact along the free path at this time, s.
+    Impact(f32),
+    /// Overlap at the end of the free path (continuous collision off).
+    Overlap,
+}
+
+/// Marks a marble whose position or velocity stopped being finite. Quarantined marbles are
+/// skipped by every stage; nothing else is affected.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct Quarantined;
+
+const EMPTY_CONTACT: Contact = Contact {
+    board: Entity::PLACEHOLDER,
+    point: Vec3::ZERO,
+    normal: Vec3::Y,
+    depth: 0.0,
+    closing_speed: 0.0,
+    kind: ContactKind::Contact,
+    time: 0.0,
+    piece: crate::geometry::PieceId::NONE,
+};
+
+impl Default for Contacts {
+    fn default() -> Self {
+        Contacts {
+            list: [EMPTY_CONTACT; MAX_CONTACTS],
+            len: 0,
+            pending: Pending::None,
+        }
+    }
+}
+
+impl Contacts {
+    /// The recorded contacts.
+    pub fn as_slice(&self) -> &[Contact] {
+        &self.list[..self.len as usize]
+    }
+
+    /// Iterates the recorded contacts.
+    pub fn iter(&self) -> impl Iterator<Item = &Contact> {
+        self.as_slice().iter()
+    }
+
+    /// Number of recorded contacts.
+    pub fn len(&self) -> usize {
+        self.len as usize
+    }
+
+    /// True when the marble touched nothing in the last substep.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// True when any recorded contact was a collision.
+    pub fn has_collision(&self) -> bool {
+        self.iter().any(|c| c.kind == ContactKind::Collision)
+    }
+
+    pub(crate) fn clear(&mut self) {
+        self.len = 0;
+        self.pending = Pending::None;
+    }
+
+    /// Records a contact; when full, keeps the deepest ones.
+    pub(crate) fn push(&mut self, contact: Contact) {
+        if (self.len as usize) < MAX_CONTACTS {
+            self.list[self.len as usize] = contact;
+            self.len += 1;
+            return;
+        }
+        let (shallowest, _) = self
+            .list
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.depth.total_cmp(&b.1.depth))
+            .expect("MAX_CONTACTS > 0");
+        if self.list[shallowest].depth < contact.depth {
+            self.list[shallowest] = contact;
+        }
+    }
+}

@@ -1,0 +1,367 @@
+//! Board shapes, reduced to convex pieces for sphere queries.
+//!
+//! A marble is a sphere, so every marble–board question is a question about the marble's
+//! *centre* and the board's surface: the marble touches a board when its centre lies within
+//! `r` of it. Every contract shape is built from parry3d shapes whose point projection
+//! answers that exactly:
+//!
+//! - `Plane` → parry's [`HalfSpace`] (solid below local y = 0),
+//! - `Cuboid` → [`Cuboid`] (solid),
+//! - `TriMesh` → [`TriMesh`]: its triangles, found through the mesh's BVH (both faces
+//!   collide; a triangle has no inside),
+//! - `HeightField` → [`HeightField`]: its triangles, found by cell range,
+//! - `Compound` → a list of posed parts, each one of the above.
+//!
+//! Detection and continuous collision work on **pieces**: a half-space, a cuboid or a single
+//! triangle. Each piece is convex, so the distance from a point to it is a well-behaved
+//! function of time along a marble's path (continuous collision advances on it), and the
+//! closest point on a piece gives an exact contact normal. Working per triangle rather than
+//! per mesh lets a marble touch several faces of a concave mesh at once; the contact filter
+//! in [`crate::narrow`] drops the redundant contacts that internal edges and coplanar seams
+//! would add ("ghost bumps").
+
+use std::fmt;
+
+use glam::{Quat, Vec3};
+use parry3d::bounding_volume::Aabb;
+use parry3d::query::PointQuery;
+use parry3d::shape::{Cuboid, HalfSpace, HeightField, TriMesh, Triangle};
+
+/// Identifies one convex piece of one board within a substep: the board's index in the
+/// substep's board list, the compound part, and the triangle (0 for solid parts).
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PieceId(pub u64);
+
+impl PieceId {
+    /// No piece.
+    pub const NONE: PieceId = PieceId(u64::MAX);
+
+    pub(crate) fn new(board: usize, part: usize, sub: u32) -> PieceId {
+        PieceId(((board as u64) << 48) | ((part as u64 & 0xFFFF) << 32) | sub as u64)
+    }
+
+    /// Index of the board in the substep's board list.
+    pub fn board(self) -> usize {
+        (self.0 >> 48) as usize
+    }
+
+    /// Part within a compound board (0 otherwise).
+    pub fn part(self) -> usize {
+        ((self.0 >> 32) & 0xFFFF) as usize
+    }
+
+    /// Triangle index within a mesh or height field part (0 for solid parts).
+    pub fn sub(self) -> u32 {
+        self.0 as u32
+    }
+}
+
+impl fmt::Debug for PieceId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if *self == PieceId::NONE {
+            return write!(f, "PieceId::NONE");
+        }
+        write!(f, "PieceId({}/{}/{})", self.board(), self.part(), self.sub())
+    }
+}
+
+/// One primitive shape of a board.
+#[derive(Clone, Debug)]
+pub enum PartShape {
+    /// The half-space below the local plane y = 0 (outward normal +Y).
+    HalfSpace(HalfSpace),
+    /// A solid box centred on the part's origin.
+    Cuboid(Cuboid),
+    /// A triangle mesh; both faces collide.
+    TriMesh(TriMesh),
+    /// A height field centred on the part's origin.
+    HeightField(HeightField),
+}
+
+/// A shape with its pose in the board's frame.
+#[derive(Clone, Debug)]
+pub struct Part {
+    /// Position of the part's origin in the board frame.
+    pub translation: Vec3,
+    /// Orientation of the part in the board frame.
+    pub rotation: Quat,
+    /// The shape.
+    pub shape: PartShape,
+    identity: bool,
+    /// Bounds in the board frame; `None` for unbounded parts (half-spaces).
+    aabb: Option<Aabb>,
+}
+
+/// A board's geometry: one or more posed parts (more than one for `Compound` boards).
+#[derive(Clone, Debug)]
+pub struct BoardGeometry {
+    parts: Vec<Part>,
+    aabb: Option<Aabb>,
+}
+
+/// A convex piece of a board, in its part's frame.
+#[derive(Clone, Copy, Debug)]
+pub enum Piece {
+    /// The half-space below y = 0.
+    HalfSpace,
+    /// A solid box.
+    Cuboid(Cuboid),
+    /// One triangle (two-sided).
+    Triangle(Triangle),
+}
+
+/// Where a point is relative to a piece, in the board frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Proximity {
+    /// Signed distance from the point to the piece's surface, m (negative inside a solid).
+    pub distance: f32,
+    /// Closest point on the surface, board frame.
+    pub point: Vec3,
+    /// Unit normal from the surface towards the point, board frame.
+    pub normal: Vec3,
+}
+
+impl BoardGeometry {
+    /// A geometry with a single part at the board's origin.
+    pub fn single(shape: PartShape) -> Self {
+        BoardGeometry::compound(vec![(Vec3::ZERO, Quat::IDENTITY, shape)])
+    }
+
+    /// A geometry made of posed parts (pose in the board's frame).
+    pub fn compound(parts: Vec<(Vec3, Quat, PartShape)>) -> Self {
+        let parts: Vec<Part> = parts
+            .into_iter()
+            .map(|(translation, rotation, shape)| {
+                let rotation = rotation.normalize();
+                let local = match &shape {
+                    PartShape::HalfSpace(_) => None,
+                    PartShape::Cuboid(c) => Some(Aabb::new(-c.half_extents, c.half_extents)),
+                    PartShape::TriMesh(m) => Some(m.local_aabb()),
+                    PartShape::HeightField(h) => Some(*h.root_aabb()),
+                };
+                Part {
+                    translation,
+                    rotation,
+                    identity: translation == Vec3::ZERO && rotation == Quat::IDENTITY,
+                    aabb: local.map(|a| transform_aabb(&a, translation, rotation)),
+                    shape,
+                }
+            })
+            .collect();
+        let aabb = parts.iter().try_fold(None::<Aabb>, |acc, p| {
+            let a = p.aabb?;
+            Some(Some(match acc {
+                None => a,
+                Some(b) => Aabb::new(b.mins.min(a.mins), b.maxs.max(a.maxs)),
+            }))
+        });
+        BoardGeometry {
+            parts,
+            aabb: aabb.flatten(),
+        }
+    }
+
+    /// The parts.
+    pub fn parts(&self) -> &[Part] {
+        &self.parts
+    }
+
+    /// Bounds in the board frame, `None` when a part is unbounded.
+    pub fn local_aabb(&self) -> Option<Aabb> {
+        self.aabb
+    }
+
+    /// Calls `f(part, sub, piece)` for every piece that may intersect `query` (board frame).
+    #[inline]
+    pub fn for_each_piece(&self, query: &Aabb, mut f: impl FnMut(usize, u32, &Piece)) {
+        for (i, part) in self.parts.iter().enumerate() {
+            if let Some(a) = &part.aabb
+                && !overlaps(a, query)
+            {
+                continue;
+            }
+            let q = if part.identity {
+                *query
+            } else {
+                inverse_transform_aabb(query, part.translation, part.rotation)
+            };
+            match &part.shape {
+                PartShape::HalfSpace(_) => {
+                    if q.mins.y <= 0.0 {
+                        f(i, 0, &Piece::HalfSpace)
+                    }
+                }
+                PartShape::Cuboid(c) => f(i, 0, &Piece::Cuboid(*c)),
+                PartShape::TriMesh(m) => {
+                    for id in m.bvh().intersect_aabb(&q) {
+                        f(i, id, &Piece::Triangle(m.triangle(id)));
+                    }
+                }
+                PartShape::HeightField(h) => {
+                    h.map_elements_in_local_aabb(&q, &mut |id, tri| {
+                        f(i, id, &Piece::Triangle(*tri))
+                    });
+                }
+            }
+        }
+    }
+
+    /// The piece `(part, sub)` as enumerated by [`Self::for_each_piece`].
+    pub fn piece(&self, part: usize, sub: u32) -> Piece {
+        match &self.parts[part].shape {
+            PartShape::HalfSpace(_) => Piece::HalfSpace,
+            PartShape::Cuboid(c) => Piece::Cuboid(*c),
+            PartShape::TriMesh(m) => Piece::Triangle(m.triangle(sub)),
+            PartShape::HeightField(h) => Piece::Triangle(
+                h.triangle_at_id(sub)
+                    .expect("piece ids come from this height field"),
+            ),
+        }
+    }
+
+    /// Where the board-frame point `p` is relative to piece `piece` of part `part`.
+    /// `hint` breaks the tie when `p` lies exactly on a triangle: the normal then points
+    /// along it.
+    #[inline]
+    pub fn proximity(&self, part: usize, piece: &Piece, p: Vec3, hint: Vec3) -> Proximity {
+        let part = &self.parts[part];
+        if part.identity {
+            return piece.proximity(p, hint);
+        }
+        let inv = part.rotation.conjugate();
+        let local = piece.proximity(inv * (p - part.translation), inv * hint);
+        Proximity {
+            distance: local.distance,
+            point: part.rotation * local.point + part.translation,
+            normal: part.rotation * local.normal,
+        }
+    }
+}
+
+impl Piece {
+    /// Signed distance, closest point and normal of the piece-frame point `q`.
+    #[inline]
+    pub fn proximity(&self, q: Vec3, hint: Vec3) -> Proximity {
+        match self {
+            Piece::HalfSpace => Proximity {
+                distance: q.y,
+                point: Vec3::new(q.x, 0.0, q.z),
+                normal: Vec3::Y,
+            },
+            Piece::Cuboid(c) => {
+                let proj = c.project_local_point(q, false);
+                let d = q - proj.point;
+                let len = d.length();
+                if len > f32::MIN_POSITIVE * 1e6 {
+                    let n = d / len;
+                    if proj.is_inside {
+                        Proximity {
+                            distance: -len,
+                            point: proj.point,
+                            normal: -n,
+                        }
+                    } else {
+                        Proximity {
+                            distance: len,
+                            point: proj.point,
+                            normal: n,
+                        }
+                    }
+                } else {
+                    // On the surface: the face whose plane is nearest.
+                    let r = q.abs() / c.half_extents.max(Vec3::splat(f32::MIN_POSITIVE));
+                    let axis = if r.x >= r.y && r.x >= r.z {
+                        Vec3::X * q.x.signum()
+                    } else if r.y >= r.z {
+                        Vec3::Y * q.y.signum()
+                    } else {
+                        Vec3::Z * q.z.signum()
+                    };
+                    Proximity {
+                        distance: 0.0,
+                        point: q,
+                        normal: axis,
+                    }
+                }
+            }
+            Piece::Triangle(t) => {
+                let proj = t.project_local_point(q, false);
+                let d = q - proj.point;
+                let len = d.length();
+                if len > f32::MIN_POSITIVE * 1e6 {
+                    Proximity {
+                        distance: len,
+                        point: proj.point,
+                        normal: d / len,
+                    }
+                } else {
+                    let mut n = t.normal().unwrap_or(Vec3::Y);
+                    if n.dot(hint) < 0.0 {
+                        n = -n;
+                    }
+                    Proximity {
+                        distance: 0.0,
+                        point: q,
+                        normal: n,
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn overlaps(a: &Aabb, b: &Aabb) -> bool {
+    a.mins.cmple(b.maxs).all() && b.mins.cmple(a.maxs).all()
+}
+
+/// Bounds of `a` after rotating by `r` then translating by `t`.
+pub(crate) fn transform_aabb(a: &Aabb, t: Vec3, r: Quat) -> Aabb {
+    let c = (a.mins + a.maxs) * 0.5;
+    let h = (a.maxs - a.mins) * 0.5;
+    let m = glam::Mat3::from_quat(r);
+    let abs = glam::Mat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
+    let c2 = m * c + t;
+    let h2 = abs * h;
+    Aabb::new(c2 - h2, c2 + h2)
+}
+
+/// Bounds of `a` brought into the frame whose pose (in `a`'s frame) is `(t, r)`.
+pub(crate) fn inverse_transform_aabb(a: &Aabb, t: Vec3, r: Quat) -> Aabb {
+    let inv = r.conjugate();
+    transform_aabb(a, inv * -t, inv)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cuboid_signed_distance_inside_and_outside() {
+        let c = Piece::Cuboid(Cuboid::new(Vec3::new(1.0, 0.5, 1.0)));
+        let out = c.proximity(Vec3::new(0.2, 0.8, 0.0), Vec3::Y);
+        assert!((out.distance - 0.3).abs() < 1e-6);
+        assert!((out.normal - Vec3::Y).length() < 1e-6);
+        let inside = c.proximity(Vec3::new(0.2, 0.4, 0.0), Vec3::Y);
+        assert!((inside.distance + 0.1).abs() < 1e-6);
+        assert!((inside.normal - Vec3::Y).length() < 1e-6);
+    }
+
+    #[test]
+    fn compound_part_pose_is_applied() {
+        let g = BoardGeometry::compound(vec![(
+            Vec3::new(0.0, 1.0, 0.0),
+            Quat::from_rotation_z(core::f32::consts::FRAC_PI_2),
+            PartShape::HalfSpace(HalfSpace::new(Vec3::Y)),
+        )]);
+        // The part's +Y points along world −X; its plane passes through (0, 1, 0).
+        let p = g.proximity(0, &Piece::HalfSpace, Vec3::new(-0.5, 3.0, 0.0), Vec3::Y);
+        assert!((p.distance - 0.5).abs() < 1e-6);
+        assert!((p.normal - -Vec3::X).length() < 1e-6);
+    }
+
+    #[test]
+    fn piece_id_round_trips() {
+        let id = PieceId::new(3, 7, 123_456);
+        assert_eq!((id.board(), id.part(), id.sub()), (3, 7, 123_456));
+    }
+}

@@ -1,0 +1,42 @@
+#![doc = include_str!("../README.md")]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod components;
+pub mod config;
+pub mod geometry;
+pub mod narrow;
+pub mod output;
+#[cfg(feature = "bevy")]
+pub mod plugin;
+pub mod response;
+pub mod scene;
+pub mod scenes;
+pub mod schedule;
+pub mod simulation;
+
+// The ECS systems live in the top-level `systems/` folder, one file per stage, so that the
+// pipeline is visible at a glance from the repository root; `#[path]` includes that folder
+// as this crate's `systems` module.
+#[path = "../systems/mod.rs"]
+pub mod systems;
+
+#[cfg(feature = "bevy")]
+pub use plugin::MarblePhysicsPlugin;
+pub use scene::{Scene, SceneError};
+pub use simulation::Simulation;
+
+/// Everything a user of the engine needs.
+pub mod prelude {
+    pub use crate::components::{
+        AngularVelocity, Board, Collider, Contact, ContactKind, Contacts, Force, Friction,
+        Marble, Mass, Position, Quarantined, Radius, Restitution, Rotation, Velocity,
+    };
+    pub use crate::config::{Integrator, StepConfig};
+    pub use crate::geometry::{BoardGeometry, PartShape};
+    #[cfg(feature = "bevy")]
+    pub use crate::plugin::MarblePhysicsPlugin;
+    pub use crate::scene::{BoardDesc, MarbleDesc, Scene, SceneError, ShapeDesc};
+    pub use crate::schedule::{MarbleSubstep, MarbleSystems};
+    pub use crate::simulation::Simulation;
+}

@@ -1,0 +1,390 @@
+//! Marble–board narrow phase: which board pieces a marble touches, and when along its path
+//! it first reaches a piece it does not touch yet.
+//!
+//! # Touching
+//! A marble of radius `r` centred at `x` touches a convex piece when the signed distance
+//! from `x` to the piece's surface is at most `r + tol` (`tol`: the touching tolerance,
+//! [`StepConfig::contact_tolerance`](crate::config::StepConfig) × r plus the f32 resolution
+//! of `x`). A marble can touch several pieces; the [`TouchList`] filter keeps only those
+//! that constrain it independently: a candidate whose closest point lies on or behind the
+//! tangent plane of a nearer accepted contact is implied by that contact (a marble pushed
+//! out of the nearer plane is also out of a point behind it). That removes the spurious
+//! edge normals of coplanar seams between boards or triangles and of convex ridges, the
+//! "ghost bumps" other engines suffer on meshes, while a concave corner (floor and wall)
+//! keeps both contacts.
+//!
+//! # Time of impact
+//! Continuous collision asks, for each piece the marble does not yet touch, the first time
+//! `τ` in the substep at which `d(τ) = dist(x(τ), piece(τ)) − r` falls to `tol`, where
+//! `x(τ)` is the integrator's own path and the piece moves with its board (translation and
+//! rotation). It uses **conservative advancement**: if `|ḋ| ≤ L` on the interval, no root
+//! lies before `τ + (d − tol/2)/L`, so stepping by that amount never passes an impact; the
+//! bound `L` is the marble's speed bound along its path plus the board's speed at the
+//! farthest point the marble can reach. A head-on approach converges in one or two
+//! iterations; grazing approaches converge geometrically. Because each step is safe, a
+//! marble at any speed never passes through a board, however thin.
+
+use std::sync::Arc;
+
+use bevy_ecs::prelude::*;
+use glam::{Quat, Vec3};
+use parry3d::bounding_volume::Aabb;
+
+use crate::config::Integrator;
+use crate::geometry::{BoardGeometry, PieceId, transform_aabb};
+
+/// Conservative-advancement iterations per piece before giving up on convergence (the
+/// marble is then advanced to the last safe time and the search resumes from there).
+const MAX_ADVANCE_ITERATIONS: u32 = 64;
+
+/// A board as seen by one substep: its pose at the substep's start and its motion.
+#[derive(Clone, Debug)]
+pub struct BoardSnapshot {
+    /// The board entity.
+    pub entity: Entity,
+    /// Its shape.
+    pub geometry: Arc<BoardGeometry>,
+    /// Origin at the substep's start, world.
+    pub position: Vec3,
+    /// Orientation at the substep's start.
+    pub rotation: Quat,
+    /// Linear velocity, m/s.
+    pub velocity: Vec3,
+    /// Angular velocity about `position`, rad/s, world.
+    pub angular_velocity: Vec3,
+    /// Restitution.
+    pub restitution: f32,
+    /// Friction.
+    pub friction: f32,
+    /// World bounds swept over the substep; `None` when unbounded (planes).
+    pub swept_aabb: Option<Aabb>,
+    /// Farthest distance of the board's bounds from its origin (for rotation bounds).
+    pub reach: f32,
+}
+
+impl BoardSnapshot {
+    /// True when the board moves or turns.
+    #[inline]
+    pub fn is_moving(&self) -> bool {
+        self.velocity != Vec3::ZERO || self.angular_velocity != Vec3::ZERO
+    }
+
+    /// Pose at time `t` after the substep's start.
+    #[inline]
+    pub fn pose_at(&self, t: f32) -> (Vec3, Quat) {
+        if self.angular_velocity == Vec3::ZERO {
+            (self.position + self.velocity * t, self.rotation)
+        } else {
+            (
+                self.position + self.velocity * t,
+                (Quat::from_scaled_axis(self.angular_velocity * t) * self.rotation).normalize(),
+            )
+        }
+    }
+
+    /// Velocity of the board's material point at world point `p`, time `t`.
+    #[inline]
+    pub fn point_velocity(&self, t: f32, p: Vec3) -> Vec3 {
+        self.velocity + self.angular_velocity.cross(p - (self.position + self.velocity * t))
+    }
+}
+
+/// The boards of the current substep, rebuilt by the prepare stage (capacity reused).
+#[derive(Resource, Default, Debug)]
+pub struct BoardCache {
+    /// One snapshot per board, in a stable order (by entity).
+    pub boards: Vec<BoardSnapshot>,
+    /// Substep duration these snapshots were prepared for, s.
+    pub h: f32,
+}
+
+/// A marble touching a board piece at some time in the substep.
+#[derive(Clone, Copy, Debug)]
+pub struct Touch {
+    /// The piece.
+    pub piece: PieceId,
+    /// Closest point on the piece, world.
+    pub point: Vec3,
+    /// Unit normal out of the piece towards the marble, world.
+    pub normal: Vec3,
+    /// Centre-to-surface distance minus radius, m (negative: penetration).
+    pub gap: f32,
+    /// Board material velocity at `point`.
+    pub board_velocity: Vec3,
+    /// Combined restitution of the pair.
+    pub restitution: f32,
+}
+
+/// Most touches considered at once by one marble.
+pub const MAX_TOUCHES: usize = 8;
+
+/// A small, allocation-free set of independent touches, nearest first.
+#[derive(Clone, Copy, Debug)]
+pub struct TouchList {
+    items: [Touch; MAX_TOUCHES],
+    len: usize,
+}
+
+impl Default for TouchList {
+    fn default() -> Self {
+        TouchList {
+            items: [Touch {
+                piece: PieceId::NONE,
+                point: Vec3::ZERO,
+                normal: Vec3::Y,
+                gap: 0.0,
+                board_velocity: Vec3::ZERO,
+                restitution: 0.0,
+            }; MAX_TOUCHES],
+            len: 0,
+        }
+    }
+}
+
+impl TouchList {
+    /// The touches.
+    #[inline]
+    pub fn as_slice(&self) -> &[Touch] {
+        &self.items[..self.len]
+    }
+
+    /// True when empty.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Empties the list.
+    #[inline]
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Appends a touch that detection recorded as a [`Contact`](crate::components::Contact)
+    /// at the substep's start (already filtered and sorted).
+    pub fn push_recorded(
+        &mut self,
+        c: &crate::components::Contact,
+        boards: &[BoardSnapshot],
+        marble_restitution: f32,
+    ) {
+        if self.len == MAX_TOUCHES {
+            return;
+        }
+        let b = &boards[c.piece.board()];
+        self.items[self.len] = Touch {
+            piece: c.piece,
+            point: c.point,
+            normal: c.normal,
+            gap: -c.depth,
+            board_velocity: b.point_velocity(0.0, c.point),
+            restitution: 0.5 * (marble_restitution + b.restitution),
+        };
+        self.len += 1;
+    }
+
+    /// Inserts a candidate keeping the list sorted by gap and free of implied contacts
+    /// (see the module docs). `plane_tol` is how far in front of an accepted tangent plane
+    /// a closest point must lie to count as independent.
+    pub fn insert(&mut self, t: Touch, plane_tol: f32) {
+        let implied_by = |a: &Touch, b: &Touch| (b.point - a.point).dot(a.normal) <= plane_tol;
+        let pos = self.as_slice().partition_point(|a| a.gap <= t.gap);
+        if self.as_slice()[..pos].iter().any(|a| implied_by(a, &t)) {
+            return;
+        }
+        // Insert, then drop the farther touches the newcomer implies.
+        if self.len == MAX_TOUCHES {
+            if pos == MAX_TOUCHES {
+                return;
+            }
+            self.len -= 1;
+        }
+        self.items.copy_within(pos..self.len, pos + 1);
+        self.items[pos] = t;
+        self.len += 1;
+        let mut w = pos + 1;
+        for r in pos + 1..self.len {
+            if !implied_by(&t, &self.items[r]) {
+                self.items[w] = self.items[r];
+                w += 1;
+            }
+        }
+        self.len = w;
+    }
+}
+
+/// Touching tolerance for a marble of radius `r` near `x`: the configured fraction of the
+/// radius plus a few f32 ulps of the coordinates (so that far from the origin, where f32
+/// cannot resolve the fraction, contact is still recognised).
+#[inline]
+pub fn touch_tolerance(relative: f32, r: f32, x: Vec3) -> f32 {
+    relative * r + 4.0 * f32::EPSILON * x.abs().max_element()
+}
+
+/// World-frame bounds of everything within `reach` of `x`.
+#[inline]
+fn sphere_aabb(x: Vec3, reach: f32) -> Aabb {
+    Aabb::new(x - Vec3::splat(reach), x + Vec3::splat(reach))
+}
+
+#[inline]
+fn overlaps(a: &Aabb, b: &Aabb) -> bool {
+    a.mins.cmple(b.maxs).all() && b.mins.cmple(a.maxs).all()
+}
+
+/// Collects into `out` the independent pieces within `tol` of a marble of radius `r`
+/// centred at `x`, at time `t` of the substep. `marble_restitution` is combined with each
+/// board's; `hint` orients normals in degenerate cases (the marble's velocity reversed).
+#[expect(clippy::too_many_arguments, reason = "a hot kernel taking plain values")]
+pub fn gather(
+    boards: &[BoardSnapshot],
+    t: f32,
+    x: Vec3,
+    r: f32,
+    tol: f32,
+    marble_restitution: f32,
+    hint: Vec3,
+    out: &mut TouchList,
+) {
+    out.clear();
+    let reach = r + tol;
+    let world = sphere_aabb(x, reach);
+    for (bi, b) in boards.iter().enumerate() {
+        if let Some(a) = &b.swept_aabb
+            && !overlaps(a, &world)
+        {
+            continue;
+        }
+        let (c, q) = b.pose_at(t);
+        let inv = q.conjugate();
+        let local = inv * (x - c);
+        let local_hint = inv * hint;
+        // A sphere's bounds are the same in any frame.
+        let query = sphere_aabb(local, reach);
+        b.geometry.for_each_piece(&query, |part, sub, piece| {
+            let p = b.geometry.proximity(part, piece, local, local_hint);
+            let gap = p.distance - r;
+            if gap <= tol {
+                let point = q * p.point + c;
+                out.insert(
+                    Touch {
+                        piece: PieceId::new(bi, part, sub),
+                        point,
+                        normal: q * p.normal,
+                        gap,
+                        board_velocity: b.point_velocity(t, point),
+                        restitution: 0.5 * (marble_restitution + b.restitution),
+                    },
+                    tol,
+                );
+            }
+        });
+    }
+}
+
+/// The path of a marble over part of a substep: state `(x, v)` at time `t0`, constant
+/// acceleration `a`, integrated by `integrator`.
+#[derive(Clone, Copy, Debug)]
+pub struct Path {
+    /// Integrator defining the path.
+    pub integrator: Integrator,
+    /// Time of the path's start within the substep, s.
+    pub t0: f32,
+    /// Centre at `t0`.
+    pub x: Vec3,
+    /// Velocity at `t0`.
+    pub v: Vec3,
+    /// Acceleration.
+    pub a: Vec3,
+}
+
+impl Path {
+    /// Centre at `t0 + tau`.
+    #[inline]
+    pub fn position(&self, tau: f32) -> Vec3 {
+        self.integrator.advance(self.x, self.v, self.a, tau).0
+    }
+}
+
+/// The earliest impact along `path` within `span` seconds with a piece the marble does not
+/// touch at the path's start: `(tau, piece)`, `tau` measured from `path.t0`.
+pub fn earliest_impact(
+    boards: &[BoardSnapshot],
+    path: &Path,
+    span: f32,
+    r: f32,
+    tol: f32,
+) -> Option<(f32, PieceId)> {
+    let end = path.position(span);
+    // Bounds of the path: the chord plus the largest bulge of any integrator's path.
+    let bulge = path.a.length() * span * span;
+    let reach = r + tol + bulge;
+    let world = Aabb::new(
+        path.x.min(end) - Vec3::splat(reach),
+        path.x.max(end) + Vec3::splat(reach),
+    );
+    let marble_speed = path.integrator.speed_bound(path.v, path.a, span);
+    let hint = -path.v;
+    let mut best: Option<(f32, PieceId)> = None;
+
+    for (bi, b) in boards.iter().enumerate() {
+        if let Some(a) = &b.swept_aabb
+            && !overlaps(a, &world)
+        {
+            continue;
+        }
+        let (c0, q0) = b.pose_at(path.t0);
+        let moving = b.is_moving();
+        // Everything the marble can reach this substep, in the board's frame; a moving
+        // board sees it through both end poses and, if it turns, a margin for the turn.
+        let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());
+        // Speed bound of the marble relative to the board's frame.
+        let mut speed = marble_speed;
+        if moving {
+            let (c1, q1) = b.pose_at(path.t0 + span);
+            let q_end = transform_aabb(&world, q1.conjugate() * -c1, q1.conjugate());
+            query = Aabb::new(query.mins.min(q_end.mins), query.maxs.max(q_end.maxs));
+            let far = (path.x - c0).length() + (marble_speed + b.velocity.length()) * span;
+            let w = b.angular_velocity.length();
+            let turn = w * span * far;
+            query = Aabb::new(query.mins - Vec3::splat(turn), query.maxs + Vec3::splat(turn));
+            speed += b.velocity.length() + w * far;
+        }
+        if speed <= 0.0 {
+            continue;
+        }
+        let limit = best.map_or(span, |(t, _)| t);
+        b.geometry.for_each_piece(&query, |part, sub, piece| {
+            let limit = best.map_or(limit, |(t, _)| t.min(limit));
+            let gap_at = |tau: f32| {
+                let (c, q) = if moving {
+                    b.pose_at(path.t0 + tau)
+                } else {
+                    (c0, q0)
+                };
+                let inv = q.conjugate();
+                let local = inv * (path.position(tau) - c);
+                b.geometry.proximity(part, piece, local, inv * hint).distance - r
+            };
+            let mut gap = gap_at(0.0);
+            if gap <= tol {
+                return; // touching already: a contact, not an impact
+            }
+            let mut tau = 0.0;
+            for _ in 0..MAX_ADVANCE_ITERATIONS {
+                tau += (gap - 0.5 * tol) / speed;
+                if tau >= limit {
+                    return;
+                }
+                gap = gap_at(tau);
+                if gap <= tol {
+                    break;
+                }
+            }
+            // Converged, or out of iterations at a safe time: either way report it, the
+            // caller advances there and searches again.
+            best = Some((tau, PieceId::new(bi, part, sub)));
+        });
+    }
+    best
+}

@@ -1,0 +1,281 @@
+//! The marble–board response: one marble through one substep, impacts and contacts.
+//!
+//! # The problem
+//! The seed's response `v' = v_m − (1 + e)((v_m − v_b)·n)n` is exact at the instant of an
+//! impact. A discrete step applies it only after the marble has sunk into the board:
+//! wrong instant, wrong height (an O(dt) error that compounds bounce after bounce), and a
+//! fast marble can pass through a thin board between two steps. A marble resting on a board
+//! is the opposite trouble: gravity pulls it in by `g·dt²` every step, and a response that
+//! treats that as an impact makes it hop for ever.
+//!
+//! # The method
+//! Each substep of length `h` runs an event loop per marble (`t` from 0 to `h`):
+//!
+//! 1. **Touches at `t`.** The pieces the marble touches ([`crate::narrow::gather`]).
+//! 2. **Velocity response.** For each touch, the normal closing speed
+//!    `u_n = (v − v_b(p))·n` decides (the seed's 衝突 / 接触): `u_n < −threshold` is a
+//!    *collision* and gets equation (1) — the board's velocity taken at the contact point,
+//!    `v_b(p) = v + ω × (p − c)`; otherwise a *contact*, whose approaching normal velocity
+//!    is removed (e = 0). At `t = 0` `v` is the velocity before this step's forces, so a
+//!    resting marble, whose gravity-induced speed `g·h` may well exceed the threshold, is
+//!    never mistaken for an impact. Several touches are solved together by a few
+//!    Gauss–Seidel passes that enforce every `u_n ≥ target`.
+//! 3. **Constrained acceleration.** For every touch the marble is not leaving, the part of
+//!    the acceleration that pushes into the board is removed. A resting marble therefore
+//!    stays exactly where it is (no sinking, no correction, no jitter), and a marble on a
+//!    smooth incline follows its surface exactly (`s = ½ g sinθ t²` with Verlet).
+//! 4. **Continuous collision** (`ccd`): the earliest impact along the integrator's path with
+//!    a piece not touched yet ([`crate::narrow::earliest_impact`]); advance to it and go to 1.
+//!    Without `ccd`, or when no impact remains, integrate to `h`.
+//! 5. **End of substep.** Any penetration left (boards that turned into the marble, marbles
+//!    spawned inside a board, or every impact when `ccd` is off) is resolved in position by
+//!    projecting the centre out along the normal — no velocity is added for it, so no energy
+//!    is injected — and in velocity by the same collision-or-contact rule, using the
+//!    closing speed before this step's forces.
+//!
+//! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
+//! that it would collide for ever stops at its last safe position for the rest of the
+//! substep.
+//!
+//! [`StepConfig::max_impacts`]: crate::config::StepConfig::max_impacts
+
+use glam::Vec3;
+
+use crate::components::{Contact, ContactKind, Contacts};
+use crate::config::Integrator;
+use crate::narrow::{BoardSnapshot, MAX_TOUCHES, Path, TouchList, earliest_impact, gather};
+
+/// The settings of one substep, copied out of [`crate::config::StepConfig`].
+#[derive(Clone, Copy, Debug)]
+pub struct SubstepParams {
+    /// Substep length, s.
+    pub h: f32,
+    /// Integrator.
+    pub integrator: Integrator,
+    /// Continuous collision on.
+    pub ccd: bool,
+    /// Collision-versus-contact threshold, m/s.
+    pub threshold: f32,
+    /// Touching tolerance relative to the radius.
+    pub tolerance: f32,
+    /// Impacts per marble per substep.
+    pub max_impacts: u32,
+}
+
+/// One marble's input to [`resolve`].
+#[derive(Clone, Copy, Debug)]
+pub struct MarbleIn {
+    /// Centre at the substep's start.
+    pub x0: Vec3,
+    /// Velocity at the substep's start, before this step's forces.
+    pub v0: Vec3,
+    /// Acceleration over the substep.
+    pub a: Vec3,
+    /// Radius.
+    pub r: f32,
+    /// Restitution.
+    pub restitution: f32,
+}
+
+/// What detection found for a marble, handed to [`resolve`].
+#[derive(Clone, Copy, Debug)]
+pub enum Found<'a> {
+    /// Touches at the substep's start.
+    Touching(&'a TouchList),
+    /// No touch at the start; the first impact along the free path at this time.
+    Impact(f32),
+    /// No touch at the start; overlap at the end of the free path (`ccd` off).
+    Overlap,
+}
+
+/// Runs the event loop of the module docs for one marble; returns its end state and
+/// records its contacts.
+pub fn resolve(
+    boards: &[BoardSnapshot],
+    p: &SubstepParams,
+    m: &MarbleIn,
+    found: Found<'_>,
+    contacts: &mut Contacts,
+) -> (Vec3, Vec3) {
+    let tol = crate::narrow::touch_tolerance(p.tolerance, m.r, m.x0);
+    let sep = separation_speed(p.threshold);
+    let mut touches = TouchList::default();
+    let mut t = 0.0f32;
+    let mut x = m.x0;
+    let mut v = m.v0;
+    let mut impacts = 0;
+    contacts.clear();
+
+    match found {
+        Found::Touching(start) => touches = *start,
+        Found::Impact(tau) => {
+            (x, v) = p.integrator.advance(x, v, m.a, tau);
+            t = tau;
+            impacts = 1;
+            gather(boards, t, x, m.r, tol, m.restitution, -v, &mut touches);
+        }
+        Found::Overlap => {}
+    }
+
+    loop {
+        respond(&touches, &mut v, p.threshold, boards, t, contacts);
+        let a = constrained_acceleration(&touches, v, m.a, sep);
+        let span = p.h - t;
+        if span <= 0.0 {
+            break;
+        }
+        if p.ccd {
+            if impacts >= p.max_impacts {
+                // Wedged: stay at the last safe position for the rest of the substep.
+                break;
+            }
+            let path = Path {
+                integrator: p.integrator,
+                t0: t,
+                x,
+                v,
+                a,
+            };
+            if let Some((tau, _)) = earliest_impact(boards, &path, span, m.r, tol) {
+                (x, v) = p.integrator.advance(x, v, a, tau);
+                t += tau;
+                impacts += 1;
+                gather(boards, t, x, m.r, tol, m.restitution, -v, &mut touches);
+                continue;
+            }
+        }
+        (x, v) = p.integrator.advance(x, v, a, span);
+        break;
+    }
+
+    // End of substep: resolve what still overlaps.
+    gather(boards, p.h, x, m.r, tol, m.restitution, -v, &mut touches);
+    for tc in touches.as_slice() {
+        let u = (v - tc.board_velocity).dot(tc.normal);
+        if tc.gap >= 0.0 {
+            record(contacts, boards, tc, ContactKind::Contact, u, p.h);
+            continue;
+        }
+        // Classify by the closing speed before this step's forces (the start velocity).
+        let u0 = (m.v0 - tc.board_velocity).dot(tc.normal);
+        let kind = if !p.ccd && u0 < -p.threshold {
+            ContactKind::Collision
+        } else {
+            ContactKind::Contact
+        };
+        if u < 0.0 {
+            let e = if kind == ContactKind::Collision {
+                tc.restitution
+            } else {
+                0.0
+            };
+            // Equation (1): v' = v − (1 + e) ((v − v_b)·n) n.
+            v -= (1.0 + e) * u * tc.normal;
+        }
+        x -= tc.gap * tc.normal;
+        record(contacts, boards, tc, kind, if p.ccd { u } else { u0 }, p.h);
+    }
+    (x, v)
+}
+
+/// Below this normal speed (m/s) a marble is not leaving the surface it touches.
+#[inline]
+pub fn separation_speed(threshold: f32) -> f32 {
+    (1e-3 * threshold).max(1e-6)
+}
+
+/// Step 2 of the module docs: collisions get equation (1), contacts lose their approaching
+/// normal velocity; every touch is recorded.
+fn respond(
+    touches: &TouchList,
+    v: &mut Vec3,
+    threshold: f32,
+    boards: &[BoardSnapshot],
+    t: f32,
+    contacts: &mut Contacts,
+) {
+    let list = touches.as_slice();
+    let mut target = [f32::NEG_INFINITY; MAX_TOUCHES];
+    let mut any = false;
+    for (i, tc) in list.iter().enumerate() {
+        let u = (*v - tc.board_velocity).dot(tc.normal);
+        let kind = if u < -threshold {
+            ContactKind::Collision
+        } else {
+            ContactKind::Contact
+        };
+        if u < 0.0 {
+            // In the board's frame the normal part of the relative velocity becomes
+            // −e·u_n: equation (1) written as a target normal speed.
+            target[i] = if kind == ContactKind::Collision {
+                -tc.restitution * u
+            } else {
+                0.0
+            };
+            any = true;
+        }
+        record(contacts, boards, tc, kind, u, t);
+    }
+    if !any {
+        return;
+    }
+    for _ in 0..4 {
+        let mut changed = false;
+        for (i, tc) in list.iter().enumerate() {
+            let u = (*v - tc.board_velocity).dot(tc.normal);
+            if u < target[i] {
+                *v += (target[i] - u) * tc.normal;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+}
+
+/// Step 3 of the module docs: the acceleration without its components into boards the
+/// marble rests on.
+#[inline]
+fn constrained_acceleration(touches: &TouchList, v: Vec3, a: Vec3, sep: f32) -> Vec3 {
+    let mut a = a;
+    for _ in 0..4 {
+        let mut changed = false;
+        for tc in touches.as_slice() {
+            if (v - tc.board_velocity).dot(tc.normal) <= sep {
+                let an = a.dot(tc.normal);
+                if an < 0.0 {
+                    a -= an * tc.normal;
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    a
+}
+
+fn record(
+    contacts: &mut Contacts,
+    boards: &[BoardSnapshot],
+    tc: &crate::narrow::Touch,
+    kind: ContactKind,
+    closing_speed: f32,
+    time: f32,
+) {
+    if contacts.iter().any(|c| c.piece == tc.piece) {
+        return;
+    }
+    contacts.push(Contact {
+        board: boards[tc.piece.board()].entity,
+        point: tc.point,
+        normal: tc.normal,
+        depth: -tc.gap,
+        closing_speed,
+        kind,
+        time,
+        piece: tc.piece,
+    });
+}

@@ -1,0 +1,566 @@
+//! Scene files: RON or JSON, the same serde types, validated once on entry.
+//!
+//! Every field has a default except a board's `shape` and a marble's `position`; unknown
+//! fields are errors. [`Scene::validate`] checks every value and names the offending field
+//! path and value (`marbles[3].radius must be > 0, got -0.01`); nothing is clamped.
+
+use std::path::Path;
+
+use glam::{Quat, Vec3};
+use parry3d::shape::{Cuboid, HalfSpace, HeightField, TriMesh};
+use parry3d::utils::Array2;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::config::{Integrator, StepConfig};
+use crate::geometry::{BoardGeometry, PartShape};
+
+/// Why a scene could not be loaded or used. Each is the user's input at fault.
+#[derive(Debug, Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("cannot read the file: {0}")]
+    Io(#[from] std::io::Error),
+    /// The extension is neither `.ron` nor `.json`.
+    #[error("unknown scene format {0:?}: use a .ron or .json file")]
+    Format(String),
+    /// Syntax errors, unknown fields, wrong types.
+    #[error("{0}")]
+    Parse(String),
+    /// A value out of its range: `{field} must be {rule}, got {value}`.
+    #[error("{field} must be {rule}, got {value}")]
+    Invalid {
+        /// Path of the field, e.g. `marbles[3].radius`.
+        field: String,
+        /// What it must be.
+        rule: String,
+        /// What it was.
+        value: String,
+    },
+    /// A switch for physics this version does not model yet.
+    #[error("{field}: {what} is not yet supported")]
+    Unsupported {
+        /// Path of the field.
+        field: String,
+        /// What is missing.
+        what: String,
+    },
+}
+
+/// A scene: step settings, boards and marbles (the contract's scene file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Scene {
+    /// m/s².
+    pub gravity: [f32; 3],
+    /// Seconds per step, > 0.
+    pub dt: f32,
+    /// Substeps per step, ≥ 1.
+    pub substeps: u32,
+    /// Time integrator.
+    pub integrator: Integrator,
+    /// Continuous collision.
+    pub ccd: bool,
+    /// Spin and friction at contacts (not yet supported).
+    pub rolling: bool,
+    /// Marble–marble collisions (not yet supported).
+    pub marble_collisions: bool,
+    /// Collision-versus-contact threshold, m/s, ≥ 0.
+    pub restitution_threshold: f32,
+    /// Seconds `marble run` simulates without `--steps`, ≥ 0.
+    pub duration: f32,
+    /// Boards.
+    pub boards: Vec<BoardDesc>,
+    /// Marbles.
+    pub marbles: Vec<MarbleDesc>,
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        let c = StepConfig::default();
+        Scene {
+            gravity: c.gravity.to_array(),
+            dt: c.dt,
+            substeps: c.substeps,
+            integrator: c.integrator,
+            ccd: c.ccd,
+            rolling: false,
+            marble_collisions: false,
+            restitution_threshold: c.restitution_threshold,
+            duration: 10.0,
+            boards: Vec::new(),
+            marbles: Vec::new(),
+        }
+    }
+}
+
+/// A kinematic board.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoardDesc {
+    /// Its shape.
+    pub shape: ShapeDesc,
+    /// World position of the board's origin, m.
+    #[serde(default)]
+    pub position: [f32; 3],
+    /// Orientation quaternion `[x, y, z, w]`, normalized on load.
+    #[serde(default = "identity_rotation")]
+    pub rotation: [f32; 4],
+    /// m/s.
+    #[serde(default)]
+    pub velocity: [f32; 3],
+    /// rad/s, world frame, about `position`.
+    #[serde(default)]
+    pub angular_velocity: [f32; 3],
+    /// In [0, 1].
+    #[serde(default = "half")]
+    pub restitution: f32,
+    /// ≥ 0.
+    #[serde(default = "half")]
+    pub friction: f32,
+}
+
+/// A marble.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MarbleDesc {
+    /// Centre, m.
+    pub position: [f32; 3],
+    /// m/s.
+    #[serde(default)]
+    pub velocity: [f32; 3],
+    /// rad/s (used when rolling is on).
+    #[serde(default)]
+    pub angular_velocity: [f32; 3],
+    /// m, > 0.
+    #[serde(default = "default_radius")]
+    pub radius: f32,
+    /// kg, > 0; default: glass (2500 kg/m³) of this radius.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mass: Option<f32>,
+    /// In [0, 1].
+    #[serde(default = "half")]
+    pub restitution: f32,
+    /// ≥ 0.
+    #[serde(default = "half")]
+    pub friction: f32,
+}
+
+impl MarbleDesc {
+    /// A default marble (8 mm glass) at `position`.
+    pub fn at(position: [f32; 3]) -> Self {
+        MarbleDesc {
+            position,
+            velocity: [0.0; 3],
+            angular_velocity: [0.0; 3],
+            radius: default_radius(),
+            mass: None,
+            restitution: 0.5,
+            friction: 0.5,
+        }
+    }
+}
+
+impl BoardDesc {
+    /// A static board of the given shape at the origin, default materials.
+    pub fn new(shape: ShapeDesc) -> Self {
+        BoardDesc {
+            shape,
+            position: [0.0; 3],
+            rotation: identity_rotation(),
+            velocity: [0.0; 3],
+            angular_velocity: [0.0; 3],
+            restitution: 0.5,
+            friction: 0.5,
+        }
+    }
+}
+
+/// The fields of `Plane` (none). In RON write `Plane(())`, in JSON `{"Plane": {}}`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaneDesc {}
+
+/// A board shape.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum ShapeDesc {
+    /// The half-space below the local plane y = 0 (normal +Y).
+    Plane(PlaneDesc),
+    /// A box centred on the board's origin.
+    Cuboid {
+        /// Half sizes, m, each > 0.
+        half_extents: [f32; 3],
+    },
+    /// A triangle mesh; both faces collide.
+    TriMesh {
+        /// Vertices, board frame, m.
+        vertices: Vec<[f32; 3]>,
+        /// Triangles as vertex indices.
+        indices: Vec<[u32; 3]>,
+    },
+    /// A height field: row i runs along Z, column j along X; centred on the origin,
+    /// spanning `scale.x` × `scale.z`, heights multiplied by `scale.y`.
+    HeightField {
+        /// `heights[i][j]`, at least 2 × 2, rectangular.
+        heights: Vec<Vec<f32>>,
+        /// Size, m, each > 0.
+        scale: [f32; 3],
+    },
+    /// Parts posed in the board's frame; parts are not compounds.
+    Compound(Vec<PartDesc>),
+}
+
+/// A part of a compound board.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PartDesc {
+    /// Its shape (not a compound).
+    pub shape: ShapeDesc,
+    /// Position in the board frame, m.
+    #[serde(default)]
+    pub position: [f32; 3],
+    /// Orientation in the board frame `[x, y, z, w]`, normalized on load.
+    #[serde(default = "identity_rotation")]
+    pub rotation: [f32; 4],
+}
+
+fn identity_rotation() -> [f32; 4] {
+    [0.0, 0.0, 0.0, 1.0]
+}
+
+fn half() -> f32 {
+    0.5
+}
+
+fn default_radius() -> f32 {
+    crate::components::DEFAULT_RADIUS
+}
+
+impl Scene {
+    /// Reads a scene file; the extension (`.ron`, `.json`) chooses the format. Parses and
+    /// validates.
+    pub fn from_path(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
+        let path = path.as_ref();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        let format = match ext.as_deref() {
+            Some("ron") => "ron",
+            Some("json") => "json",
+            _ => return Err(SceneError::Format(path.display().to_string())),
+        };
+        let text = std::fs::read_to_string(path)?;
+        if format == "ron" {
+            Scene::from_ron_str(&text)
+        } else {
+            Scene::from_json_str(&text)
+        }
+    }
+
+    /// Parses and validates a RON scene.
+    pub fn from_ron_str(text: &str) -> Result<Scene, SceneError> {
+        let scene: Scene = ron::Options::default()
+            .from_str(text)
+            .map_err(|e| SceneError::Parse(e.to_string()))?;
+        scene.validate()?;
+        Ok(scene)
+    }
+
+    /// Parses and validates a JSON scene.
+    pub fn from_json_str(text: &str) -> Result<Scene, SceneError> {
+        let scene: Scene =
+            serde_json::from_str(text).map_err(|e| SceneError::Parse(e.to_string()))?;
+        scene.validate()?;
+        Ok(scene)
+    }
+
+    /// The scene as pretty RON.
+    pub fn to_ron_string(&self) -> String {
+        ron::ser::to_string_pretty(self, ron::ser::PrettyConfig::default())
+            .expect("scenes always serialize")
+    }
+
+    /// The scene as pretty JSON.
+    pub fn to_json_string(&self) -> String {
+        serde_json::to_string_pretty(self).expect("scenes always serialize")
+    }
+
+    /// Checks every value; the first offence is returned with its field path.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        finite3("gravity", self.gravity)?;
+        positive("dt", self.dt)?;
+        if self.substeps < 1 {
+            return invalid("substeps", ">= 1", self.substeps);
+        }
+        non_negative("restitution_threshold", self.restitution_threshold)?;
+        non_negative("duration", self.duration)?;
+        if self.rolling {
+            return Err(SceneError::Unsupported {
+                field: "rolling".into(),
+                what: "rolling (spin and friction)".into(),
+            });
+        }
+        if self.marble_collisions {
+            return Err(SceneError::Unsupported {
+                field: "marble_collisions".into(),
+                what: "marble-marble collision".into(),
+            });
+        }
+        for (i, b) in self.boards.iter().enumerate() {
+            let f = |name: &str| format!("boards[{i}].{name}");
+            validate_shape(&f("shape"), &b.shape, true)?;
+            finite3(&f("position"), b.position)?;
+            rotation(&f("rotation"), b.rotation)?;
+            finite3(&f("velocity"), b.velocity)?;
+            finite3(&f("angular_velocity"), b.angular_velocity)?;
+            unit_interval(&f("restitution"), b.restitution)?;
+            non_negative(&f("friction"), b.friction)?;
+        }
+        for (i, m) in self.marbles.iter().enumerate() {
+            let f = |name: &str| format!("marbles[{i}].{name}");
+            finite3(&f("position"), m.position)?;
+            finite3(&f("velocity"), m.velocity)?;
+            finite3(&f("angular_velocity"), m.angular_velocity)?;
+            positive(&f("radius"), m.radius)?;
+            if let Some(mass) = m.mass {
+                positive(&f("mass"), mass)?;
+                if !(1.0 / mass).is_finite() {
+                    return invalid(&f("mass"), "large enough to have a finite inverse", mass);
+                }
+            } else if !crate::components::Mass::glass_mass(m.radius).is_normal() {
+                return invalid(
+                    &f("radius"),
+                    "small and large enough for a finite, non-zero glass mass (or give mass)",
+                    m.radius,
+                );
+            }
+            unit_interval(&f("restitution"), m.restitution)?;
+            non_negative(&f("friction"), m.friction)?;
+        }
+        Ok(())
+    }
+
+    /// The step settings of this scene.
+    pub fn step_config(&self) -> StepConfig {
+        StepConfig {
+            gravity: Vec3::from_array(self.gravity),
+            dt: self.dt,
+            substeps: self.substeps,
+            integrator: self.integrator,
+            ccd: self.ccd,
+            restitution_threshold: self.restitution_threshold,
+            ..StepConfig::default()
+        }
+    }
+
+    /// Number of steps `marble run` takes without `--steps`: `duration / dt`, rounded.
+    pub fn default_steps(&self) -> u64 {
+        (self.duration as f64 / self.dt as f64).round() as u64
+    }
+}
+
+impl ShapeDesc {
+    /// Builds the parry3d geometry. The shape must have passed validation.
+    pub fn build(&self) -> BoardGeometry {
+        match self {
+            ShapeDesc::Compound(parts) => BoardGeometry::compound(
+                parts
+                    .iter()
+                    .map(|p| {
+                        (
+                            Vec3::from_array(p.position),
+                            quat(p.rotation),
+                            p.shape.build_part(),
+                        )
+                    })
+                    .collect(),
+            ),
+            other => BoardGeometry::single(other.build_part()),
+        }
+    }
+
+    fn build_part(&self) -> PartShape {
+        match self {
+            ShapeDesc::Plane(_) => PartShape::HalfSpace(HalfSpace::new(Vec3::Y)),
+            ShapeDesc::Cuboid { half_extents } => {
+                PartShape::Cuboid(Cuboid::new(Vec3::from_array(*half_extents)))
+            }
+            ShapeDesc::TriMesh { vertices, indices } => PartShape::TriMesh(
+                TriMesh::new(
+                    vertices.iter().map(|v| Vec3::from_array(*v)).collect(),
+                    indices.clone(),
+                )
+                .expect("validated mesh"),
+            ),
+            ShapeDesc::HeightField { heights, scale } => {
+                let nrows = heights.len();
+                let ncols = heights[0].len();
+                // parry's Array2 is column-major: element (i, j) at i + j·nrows.
+                let mut data = vec![0.0; nrows * ncols];
+                for (i, row) in heights.iter().enumerate() {
+                    for (j, h) in row.iter().enumerate() {
+                        data[i + j * nrows] = *h;
+                    }
+                }
+                PartShape::HeightField(HeightField::new(
+                    Array2::new(nrows, ncols, data),
+                    Vec3::from_array(*scale),
+                ))
+            }
+            ShapeDesc::Compound(_) => unreachable!("validation refuses nested compounds"),
+        }
+    }
+}
+
+/// A quaternion from `[x, y, z, w]`, normalized.
+pub fn quat(q: [f32; 4]) -> Quat {
+    Quat::from_array(q).normalize()
+}
+
+fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Result<(), SceneError> {
+    match shape {
+        ShapeDesc::Plane(_) => Ok(()),
+        ShapeDesc::Cuboid { half_extents } => {
+            for (k, h) in ["x", "y", "z"].iter().zip(half_extents) {
+                positive(&format!("{field}.Cuboid.half_extents.{k}"), *h)?;
+            }
+            Ok(())
+        }
+        ShapeDesc::TriMesh { vertices, indices } => {
+            if indices.is_empty() {
+                return invalid(&format!("{field}.TriMesh.indices"), "non-empty", "[]");
+            }
+            for (i, v) in vertices.iter().enumerate() {
+                finite3(&format!("{field}.TriMesh.vertices[{i}]"), *v)?;
+            }
+            for (i, tri) in indices.iter().enumerate() {
+                for (k, &ix) in tri.iter().enumerate() {
+                    if ix as usize >= vertices.len() {
+                        return invalid(
+                            &format!("{field}.TriMesh.indices[{i}][{k}]"),
+                            &format!("< {} (the number of vertices)", vertices.len()),
+                            ix,
+                        );
+                    }
+                }
+                let [a, b, c] = tri.map(|ix| Vec3::from_array(vertices[ix as usize]));
+                if (b - a).cross(c - a).length_squared() <= 0.0 {
+                    return invalid(
+                        &format!("{field}.TriMesh.indices[{i}]"),
+                        "a triangle of non-zero area",
+                        format!("{tri:?}"),
+                    );
+                }
+            }
+            Ok(())
+        }
+        ShapeDesc::HeightField { heights, scale } => {
+            if heights.len() < 2 {
+                return invalid(
+                    &format!("{field}.HeightField.heights"),
+                    "at least 2 rows",
+                    heights.len(),
+                );
+            }
+            let ncols = heights[0].len();
+            if ncols < 2 {
+                return invalid(
+                    &format!("{field}.HeightField.heights[0]"),
+                    "at least 2 columns",
+                    ncols,
+                );
+            }
+            for (i, row) in heights.iter().enumerate() {
+                if row.len() != ncols {
+                    return invalid(
+                        &format!("{field}.HeightField.heights[{i}]"),
+                        &format!("{ncols} long like row 0"),
+                        row.len(),
+                    );
+                }
+                for (j, h) in row.iter().enumerate() {
+                    finite(&format!("{field}.HeightField.heights[{i}][{j}]"), *h)?;
+                }
+            }
+            for (k, s) in ["x", "y", "z"].iter().zip(scale) {
+                positive(&format!("{field}.HeightField.scale.{k}"), *s)?;
+            }
+            Ok(())
+        }
+        ShapeDesc::Compound(parts) => {
+            if !top {
+                return invalid(field, "not a Compound (parts are not compounds)", "Compound");
+            }
+            if parts.is_empty() {
+                return invalid(&format!("{field}.Compound"), "non-empty", "[]");
+            }
+            for (i, p) in parts.iter().enumerate() {
+                let f = format!("{field}.Compound[{i}]");
+                validate_shape(&format!("{f}.shape"), &p.shape, false)?;
+                finite3(&format!("{f}.position"), p.position)?;
+                rotation(&format!("{f}.rotation"), p.rotation)?;
+            }
+            Ok(())
+        }
+    }
+}
+
+fn invalid<T>(field: &str, rule: &str, value: impl std::fmt::Display) -> Result<T, SceneError> {
+    Err(SceneError::Invalid {
+        field: field.to_string(),
+        rule: rule.to_string(),
+        value: value.to_string(),
+    })
+}
+
+fn finite(field: &str, x: f32) -> Result<(), SceneError> {
+    if x.is_finite() {
+        Ok(())
+    } else {
+        invalid(field, "finite", x)
+    }
+}
+
+fn finite3(field: &str, v: [f32; 3]) -> Result<(), SceneError> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        invalid(field, "finite", format!("{v:?}"))
+    }
+}
+
+fn positive(field: &str, x: f32) -> Result<(), SceneError> {
+    if x.is_finite() && x > 0.0 {
+        Ok(())
+    } else {
+        invalid(field, "> 0", x)
+    }
+}
+
+fn non_negative(field: &str, x: f32) -> Result<(), SceneError> {
+    if x.is_finite() && x >= 0.0 {
+        Ok(())
+    } else {
+        invalid(field, ">= 0", x)
+    }
+}
+
+fn unit_interval(field: &str, x: f32) -> Result<(), SceneError> {
+    if (0.0..=1.0).contains(&x) {
+        Ok(())
+    } else {
+        invalid(field, "in [0, 1]", x)
+    }
+}
+
+fn rotation(field: &str, q: [f32; 4]) -> Result<(), SceneError> {
+    if !q.iter().all(|x| x.is_finite()) {
+        return invalid(field, "finite", format!("{q:?}"));
+    }
+    let norm = Quat::from_array(q).length();
+    if !norm.is_normal() {
+        return invalid(field, "a non-zero quaternion", format!("{q:?}"));
+    }
+    Ok(())
+}

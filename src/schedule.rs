@@ -1,0 +1,85 @@
+//! The physics step's schedule: the one place where the stage order is fixed.
+
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::{LogLevel, ScheduleBuildSettings, ScheduleLabel};
+
+use crate::config::{StepConfig, SubstepCounter};
+use crate::systems::{boards, detect, forces, integrate, respond};
+
+/// The schedule that runs one substep. A step runs it `substeps` times
+/// ([`run_step`]).
+#[derive(ScheduleLabel, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct MarbleSubstep;
+
+/// The stages of a substep, in order. Add your own systems to the physics with
+/// `.in_set(MarbleSystems::…)` or order them `.before`/`.after` a stage.
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MarbleSystems {
+    /// Snapshot every board's pose and motion for the substep.
+    PrepareBoards,
+    /// Gravity plus user forces → acceleration.
+    AccumulateForces,
+    /// Free motion with the chosen integrator.
+    Integrate,
+    /// Touches (collision or contact), first impact, or end overlap.
+    DetectContacts,
+    /// Equation (1), contacts, continuous collision, position correction.
+    Respond,
+    /// Kinematic boards advance.
+    MoveBoards,
+    /// Last substep only: clear forces, quarantine non-finite marbles.
+    Finish,
+}
+
+/// Builds the substep schedule: every stage chained in order, single-threaded, and
+/// ambiguity detection set to error so that any unordered conflicting pair of systems
+/// fails to build. It runs on bevy_ecs's default executor (single-threaded without
+/// bevy_ecs's `multi_threaded` feature; the stages are a chain either way).
+pub fn substep_schedule() -> Schedule {
+    let mut schedule = Schedule::new(MarbleSubstep);
+    schedule.set_build_settings(ScheduleBuildSettings {
+        ambiguity_detection: LogLevel::Error,
+        ..Default::default()
+    });
+    schedule.configure_sets(
+        (
+            MarbleSystems::PrepareBoards,
+            MarbleSystems::AccumulateForces,
+            MarbleSystems::Integrate,
+            MarbleSystems::DetectContacts,
+            MarbleSystems::Respond,
+            MarbleSystems::MoveBoards,
+            MarbleSystems::Finish,
+        )
+            .chain(),
+    );
+    schedule.add_systems((
+        boards::prepare_boards.in_set(MarbleSystems::PrepareBoards),
+        forces::accumulate_forces.in_set(MarbleSystems::AccumulateForces),
+        integrate::integrate.in_set(MarbleSystems::Integrate),
+        detect::detect_contacts.in_set(MarbleSystems::DetectContacts),
+        respond::respond.in_set(MarbleSystems::Respond),
+        boards::move_boards.in_set(MarbleSystems::MoveBoards),
+        (forces::clear_forces, forces::quarantine_non_finite)
+            .chain()
+            .in_set(MarbleSystems::Finish)
+            .run_if(forces::last_substep),
+    ));
+    schedule
+}
+
+/// Inserts the resources the substep schedule needs, keeping any already present.
+pub fn init_resources(world: &mut World) {
+    world.init_resource::<StepConfig>();
+    world.init_resource::<SubstepCounter>();
+    world.init_resource::<crate::narrow::BoardCache>();
+}
+
+/// Runs one step: `substeps` runs of the substep schedule through `run_substep`.
+pub fn run_step(world: &mut World, mut run_substep: impl FnMut(&mut World)) {
+    let count = world.resource::<StepConfig>().substeps.max(1);
+    for index in 0..count {
+        *world.resource_mut::<SubstepCounter>() = SubstepCounter { index, count };
+        run_substep(world);
+    }
+}

@@ -1,0 +1,145 @@
+//! Headless stepping: a scene's world and the physics schedule, without `bevy_app`.
+
+use bevy_ecs::prelude::*;
+use glam::Vec3;
+
+use crate::components::{
+    AngularVelocity, Board, Collider, Friction, Marble, Mass, Position, Quarantined, Radius,
+    Restitution, Rotation, Velocity,
+};
+use crate::scene::{Scene, SceneError, quat};
+use crate::schedule::{init_resources, run_step, substep_schedule};
+
+/// A scene's `World` and the physics schedule. Stepping one marble or a million goes
+/// through the same systems as [`crate::MarblePhysicsPlugin`].
+///
+/// ```
+/// use bevy_marble::prelude::*;
+///
+/// let scene = Scene::from_ron_str(
+///     "(boards: [(shape: Plane(()))], marbles: [(position: (0.0, 1.0, 0.0))])",
+/// )?;
+/// let mut sim = Simulation::from_scene(&scene)?;
+/// for _ in 0..240 {
+///     sim.step();
+/// }
+/// let marble = sim.marbles()[0];
+/// let y = sim.world().get::<Position>(marble).unwrap().y;
+/// assert!(y < 1.0);
+/// # Ok::<(), SceneError>(())
+/// ```
+pub struct Simulation {
+    world: World,
+    schedule: Schedule,
+    marbles: Vec<Entity>,
+    boards: Vec<Entity>,
+    steps: u64,
+}
+
+impl Simulation {
+    /// Validates the scene and builds its world: one entity per board and marble, in the
+    /// scene's order, and the [`crate::config::StepConfig`] from its settings.
+    pub fn from_scene(scene: &Scene) -> Result<Simulation, SceneError> {
+        scene.validate()?;
+        let mut world = World::new();
+        world.insert_resource(scene.step_config());
+        init_resources(&mut world);
+        let boards = scene
+            .boards
+            .iter()
+            .map(|b| {
+                world
+                    .spawn((
+                        Board,
+                        Collider::new(b.shape.build()),
+                        Position(Vec3::from_array(b.position)),
+                        Rotation(quat(b.rotation)),
+                        Velocity(Vec3::from_array(b.velocity)),
+                        AngularVelocity(Vec3::from_array(b.angular_velocity)),
+                        Restitution(b.restitution),
+                        Friction(b.friction),
+                    ))
+                    .id()
+            })
+            .collect();
+        let marbles = scene
+            .marbles
+            .iter()
+            .map(|m| {
+                world
+                    .spawn((
+                        Marble,
+                        Position(Vec3::from_array(m.position)),
+                        Velocity(Vec3::from_array(m.velocity)),
+                        Radius(m.radius),
+                        m.mass.map_or_else(|| Mass::glass(m.radius), Mass::new),
+                        Restitution(m.restitution),
+                        Friction(m.friction),
+                    ))
+                    .id()
+            })
+            .collect();
+        let mut schedule = substep_schedule();
+        schedule
+            .initialize(&mut world)
+            .expect("the physics schedule is well formed");
+        Ok(Simulation {
+            world,
+            schedule,
+            marbles,
+            boards,
+            steps: 0,
+        })
+    }
+
+    /// Advances one scene `dt` (all substeps).
+    pub fn step(&mut self) {
+        let schedule = &mut self.schedule;
+        run_step(&mut self.world, |world| schedule.run(world));
+        self.steps += 1;
+    }
+
+    /// The world: marbles and boards are entities, settings are resources.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The world, mutably (spawn marbles, change settings, apply forces).
+    pub fn world_mut(&mut self) -> &mut World {
+        &mut self.world
+    }
+
+    /// The marbles of the scene, in its order.
+    pub fn marbles(&self) -> &[Entity] {
+        &self.marbles
+    }
+
+    /// The boards of the scene, in its order.
+    pub fn boards(&self) -> &[Entity] {
+        &self.boards
+    }
+
+    /// Steps taken so far.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The scene's marbles that have been quarantined (their state stopped being finite).
+    pub fn quarantined(&self) -> Vec<usize> {
+        self.marbles
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| self.world.get::<Quarantined>(**e).is_some())
+            .map(|(i, _)| i)
+            .collect()
+    }
+
+    /// Position and velocity of the scene's marble `index`.
+    pub fn marble_state(&self, index: usize) -> (Vec3, Vec3) {
+        let e = self.marbles[index];
+        (
+            self.world.get::<Position>(e).expect("a marble").0,
+            self.world.get::<Velocity>(e).expect("a marble").0,
+        )
+    }
+}

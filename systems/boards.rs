@@ -1,0 +1,86 @@
+//! Kinematic boards: the per-substep snapshot and their motion.
+
+use bevy_ecs::prelude::*;
+use glam::{Quat, Vec3};
+use parry3d::bounding_volume::Aabb;
+
+use crate::components::{
+    AngularVelocity, Board, Collider, Friction, Position, Restitution, Rotation, Velocity,
+};
+use crate::config::StepConfig;
+use crate::geometry::transform_aabb;
+use crate::narrow::{BoardCache, BoardSnapshot};
+
+/// Snapshots every board (pose, motion, bounds swept over the substep) into
+/// [`BoardCache`], reusing its storage.
+pub fn prepare_boards(
+    config: Res<StepConfig>,
+    mut cache: ResMut<BoardCache>,
+    boards: Query<
+        (
+            Entity,
+            &Collider,
+            &Position,
+            &Rotation,
+            &Velocity,
+            &AngularVelocity,
+            &Restitution,
+            &Friction,
+        ),
+        With<Board>,
+    >,
+) {
+    let h = config.substep_dt();
+    let cache = cache.as_mut();
+    cache.h = h;
+    cache.boards.clear();
+    for (entity, collider, position, rotation, velocity, angular, restitution, friction) in
+        &boards
+    {
+        let local = collider.0.local_aabb();
+        let reach = local.map_or(f32::INFINITY, |a| a.mins.abs().max(a.maxs.abs()).length());
+        let swept_aabb = local.map(|a| {
+            let start = transform_aabb(&a, position.0, rotation.0);
+            let end_pos = position.0 + velocity.0 * h;
+            if angular.0 == Vec3::ZERO {
+                let end = transform_aabb(&a, end_pos, rotation.0);
+                Aabb::new(start.mins.min(end.mins), start.maxs.max(end.maxs))
+            } else {
+                // Turning: everything within `reach` of the origin's path.
+                let r = Vec3::splat(reach);
+                Aabb::new(
+                    position.0.min(end_pos) - r,
+                    position.0.max(end_pos) + r,
+                )
+            }
+        });
+        cache.boards.push(BoardSnapshot {
+            entity,
+            geometry: collider.0.clone(),
+            position: position.0,
+            rotation: rotation.0,
+            velocity: velocity.0,
+            angular_velocity: angular.0,
+            restitution: restitution.0,
+            friction: friction.0,
+            swept_aabb,
+            reach,
+        });
+    }
+}
+
+/// Advances every board by its linear and angular velocity over the substep.
+pub fn move_boards(
+    cache: Res<BoardCache>,
+    mut boards: Query<(&mut Position, &mut Rotation, &Velocity, &AngularVelocity), With<Board>>,
+) {
+    let h = cache.h;
+    for (mut position, mut rotation, velocity, angular) in &mut boards {
+        if velocity.0 != Vec3::ZERO {
+            position.0 += velocity.0 * h;
+        }
+        if angular.0 != Vec3::ZERO {
+            rotation.0 = (Quat::from_scaled_axis(angular.0 * h) * rotation.0).normalize();
+        }
+    }
+}

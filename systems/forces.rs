@@ -1,0 +1,45 @@
+//! Force accumulation and the end-of-step housekeeping.
+
+use bevy_ecs::prelude::*;
+
+use crate::components::{Acceleration, Force, Marble, Mass, Position, Quarantined, Velocity};
+use crate::config::{StepConfig, SubstepCounter};
+
+/// Acceleration of every marble for this substep: `gravity + Force / mass`.
+pub fn accumulate_forces(
+    config: Res<StepConfig>,
+    mut marbles: Query<(&Force, &Mass, &mut Acceleration), (With<Marble>, Without<Quarantined>)>,
+) {
+    let g = config.gravity;
+    for (force, mass, mut acceleration) in &mut marbles {
+        acceleration.0 = g + force.0 * mass.inverse();
+    }
+}
+
+/// Run condition: true during the last substep of a step.
+pub fn last_substep(counter: Res<SubstepCounter>) -> bool {
+    counter.is_last()
+}
+
+/// Clears every marble's [`Force`] once the whole step has integrated it.
+pub fn clear_forces(mut forces: Query<&mut Force, With<Marble>>) {
+    for mut force in &mut forces {
+        if force.0 != glam::Vec3::ZERO {
+            force.0 = glam::Vec3::ZERO;
+        }
+    }
+}
+
+/// Marks marbles whose state stopped being finite (a NaN force, an overflow) with
+/// [`Quarantined`]: they are left out of every later step instead of spreading NaN, and
+/// [`crate::Simulation::quarantined`] reports them.
+pub fn quarantine_non_finite(
+    mut commands: Commands,
+    marbles: Query<(Entity, &Position, &Velocity), (With<Marble>, Without<Quarantined>)>,
+) {
+    for (entity, position, velocity) in &marbles {
+        if !(position.is_finite() && velocity.is_finite()) {
+            commands.entity(entity).insert(Quarantined);
+        }
+    }
+}

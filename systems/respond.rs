@@ -1,0 +1,87 @@
+//! The response: impacts and contacts of the marbles detection flagged.
+
+use bevy_ecs::prelude::*;
+
+use crate::components::{
+    Acceleration, Contacts, Marble, Pending, Position, Quarantined, Radius, Restitution,
+    StepStart, Velocity,
+};
+use crate::config::StepConfig;
+use crate::narrow::{BoardCache, TouchList, gather, touch_tolerance};
+use crate::response::{Found, MarbleIn, SubstepParams, resolve};
+
+/// Resolves every flagged marble through the substep's event loop
+/// ([`crate::response`]): equation (1) for collisions, removal of approaching velocity for
+/// contacts, continuous collision, and position correction without added energy. Marbles
+/// detection did not flag keep their free motion.
+pub fn respond(
+    config: Res<StepConfig>,
+    cache: Res<BoardCache>,
+    mut marbles: Query<
+        (
+            &mut Position,
+            &mut Velocity,
+            &StepStart,
+            &Acceleration,
+            &Radius,
+            &Restitution,
+            &mut Contacts,
+        ),
+        (With<Marble>, Without<Quarantined>),
+    >,
+) {
+    let boards = cache.boards.as_slice();
+    let params = SubstepParams {
+        h: cache.h,
+        integrator: config.integrator,
+        ccd: config.ccd,
+        threshold: config.restitution_threshold,
+        tolerance: config.contact_tolerance,
+        max_impacts: config.max_impacts,
+    };
+    let mut touches = TouchList::default();
+    for (mut position, mut velocity, start, acceleration, radius, restitution, mut contacts) in
+        &mut marbles
+    {
+        if contacts.pending == Pending::None {
+            continue;
+        }
+        let marble = MarbleIn {
+            x0: start.position,
+            v0: start.velocity,
+            a: acceleration.0,
+            r: radius.0,
+            restitution: restitution.0,
+        };
+        let found = match contacts.pending {
+            Pending::Touching => {
+                // Detection recorded these touches; gather again only if it ran out of
+                // room to record them all.
+                if contacts.len() < crate::components::MAX_CONTACTS {
+                    touches.clear();
+                    for c in contacts.iter() {
+                        touches.push_recorded(c, boards, marble.restitution);
+                    }
+                } else {
+                    let tol = touch_tolerance(params.tolerance, marble.r, marble.x0);
+                    gather(
+                        boards,
+                        0.0,
+                        marble.x0,
+                        marble.r,
+                        tol,
+                        marble.restitution,
+                        -marble.v0,
+                        &mut touches,
+                    );
+                }
+                Found::Touching(&touches)
+            }
+            Pending::Impact(tau) => Found::Impact(tau),
+            Pending::Overlap | Pending::None => Found::Overlap,
+        };
+        let (x, v) = resolve(boards, &params, &marble, found, &mut contacts);
+        position.0 = x;
+        velocity.0 = v;
+    }
+}
