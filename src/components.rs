@@ -93,14 +93,7 @@ pub struct Marble;
 
 /// Marks a board: a kinematic body with a [`Collider`] shape.
 #[derive(Component, Clone, Copy, Debug, Default)]
-#[require(
-    Position,
-    Rotation,
-    Velocity,
-    AngularVelocity,
-    Restitution,
-    Friction
-)]
+#[require(Position, Rotation, Velocity, AngularVelocity, Restitution, Friction)]
 pub struct Board;
 
 /// A board's shape (parry3d shapes behind a shared pointer, cheap to clone).
@@ -138,7 +131,10 @@ impl Mass {
     /// A mass of `mass` kg. Panics in debug builds unless `mass` is finite and > 0 (scene
     /// loading validates it first and reports an error instead).
     pub fn new(mass: f32) -> Self {
-        debug_assert!(mass.is_finite() && mass > 0.0, "mass must be > 0, got {mass}");
+        debug_assert!(
+            mass.is_finite() && mass > 0.0,
+            "mass must be > 0, got {mass}"
+        );
         Mass {
             mass,
             inverse: 1.0 / mass,

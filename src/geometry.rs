@@ -61,7 +61,13 @@ impl fmt::Debug for PieceId {
         if *self == PieceId::NONE {
             return write!(f, "PieceId::NONE");
         }
-        write!(f, "PieceId({}/{}/{})", self.board(), self.part(), self.sub())
+        write!(
+            f,
+            "PieceId({}/{}/{})",
+            self.board(),
+            self.part(),
+            self.sub()
+        )
     }
 }
 
@@ -87,7 +93,10 @@ pub struct Part {
     pub rotation: Quat,
     /// The shape.
     pub shape: PartShape,
+    /// No rotation and no translation.
     identity: bool,
+    /// No rotation (translation only).
+    unrotated: bool,
     /// Bounds in the board frame; `None` for unbounded parts (half-spaces).
     aabb: Option<Aabb>,
 }
@@ -143,6 +152,7 @@ impl BoardGeometry {
                     translation,
                     rotation,
                     identity: translation == Vec3::ZERO && rotation == Quat::IDENTITY,
+                    unrotated: rotation == Quat::IDENTITY,
                     aabb: local.map(|a| transform_aabb(&a, translation, rotation)),
                     shape,
                 }
@@ -182,6 +192,8 @@ impl BoardGeometry {
             }
             let q = if part.identity {
                 *query
+            } else if part.unrotated {
+                Aabb::new(query.mins - part.translation, query.maxs - part.translation)
             } else {
                 inverse_transform_aabb(query, part.translation, part.rotation)
             };
@@ -227,6 +239,13 @@ impl BoardGeometry {
         let part = &self.parts[part];
         if part.identity {
             return piece.proximity(p, hint);
+        }
+        if part.unrotated {
+            let local = piece.proximity(p - part.translation, hint);
+            return Proximity {
+                point: local.point + part.translation,
+                ..local
+            };
         }
         let inv = part.rotation.conjugate();
         let local = piece.proximity(inv * (p - part.translation), inv * hint);
@@ -289,10 +308,23 @@ impl Piece {
                 let d = q - proj.point;
                 let len = d.length();
                 if len > f32::MIN_POSITIVE * 1e6 {
+                    let mut normal = d / len;
+                    // Over the face, or over an edge or vertex the face meets flush
+                    // (within the f32 resolution of its coordinates), the exact normal is the face's: the radial
+                    // direction would carry the projection's rounding error (1e-5 rad for
+                    // a marble above a seam) into the contact normal.
+                    if let Some(face) = t.normal() {
+                        let along = d.dot(face);
+                        let off_plane = (d - along * face).length();
+                        let scale = t.a.abs().max(t.b.abs()).max(t.c.abs()).max(q.abs());
+                        if off_plane <= 16.0 * f32::EPSILON * (scale.max_element() + len) {
+                            normal = face * along.signum();
+                        }
+                    }
                     Proximity {
                         distance: len,
                         point: proj.point,
-                        normal: d / len,
+                        normal,
                     }
                 } else {
                     let mut n = t.normal().unwrap_or(Vec3::Y);

@@ -29,8 +29,8 @@ pub use simulation::Simulation;
 /// Everything a user of the engine needs.
 pub mod prelude {
     pub use crate::components::{
-        AngularVelocity, Board, Collider, Contact, ContactKind, Contacts, Force, Friction,
-        Marble, Mass, Position, Quarantined, Radius, Restitution, Rotation, Velocity,
+        AngularVelocity, Board, Collider, Contact, ContactKind, Contacts, Force, Friction, Marble,
+        Mass, Position, Quarantined, Radius, Restitution, Rotation, Velocity,
     };
     pub use crate::config::{Integrator, StepConfig};
     pub use crate::geometry::{BoardGeometry, PartShape};

@@ -85,7 +85,10 @@ impl BoardSnapshot {
     /// Velocity of the board's material point at world point `p`, time `t`.
     #[inline]
     pub fn point_velocity(&self, t: f32, p: Vec3) -> Vec3 {
-        self.velocity + self.angular_velocity.cross(p - (self.position + self.velocity * t))
+        self.velocity
+            + self
+                .angular_velocity
+                .cross(p - (self.position + self.velocity * t))
     }
 }
 
@@ -235,7 +238,10 @@ fn overlaps(a: &Aabb, b: &Aabb) -> bool {
 /// Collects into `out` the independent pieces within `tol` of a marble of radius `r`
 /// centred at `x`, at time `t` of the substep. `marble_restitution` is combined with each
 /// board's; `hint` orients normals in degenerate cases (the marble's velocity reversed).
-#[expect(clippy::too_many_arguments, reason = "a hot kernel taking plain values")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "a hot kernel taking plain values"
+)]
 pub fn gather(
     boards: &[BoardSnapshot],
     t: f32,
@@ -347,7 +353,10 @@ pub fn earliest_impact(
             let far = (path.x - c0).length() + (marble_speed + b.velocity.length()) * span;
             let w = b.angular_velocity.length();
             let turn = w * span * far;
-            query = Aabb::new(query.mins - Vec3::splat(turn), query.maxs + Vec3::splat(turn));
+            query = Aabb::new(
+                query.mins - Vec3::splat(turn),
+                query.maxs + Vec3::splat(turn),
+            );
             speed += b.velocity.length() + w * far;
         }
         if speed <= 0.0 {
@@ -364,7 +373,10 @@ pub fn earliest_impact(
                 };
                 let inv = q.conjugate();
                 let local = inv * (path.position(tau) - c);
-                b.geometry.proximity(part, piece, local, inv * hint).distance - r
+                b.geometry
+                    .proximity(part, piece, local, inv * hint)
+                    .distance
+                    - r
             };
             let mut gap = gap_at(0.0);
             if gap <= tol {

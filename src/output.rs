@@ -132,10 +132,7 @@ impl HeightTrace {
                     .y_desc("y (m)")
                     .draw()?;
                 for (i, s) in self.series.iter().enumerate() {
-                    chart.draw_series(LineSeries::new(
-                        s.iter().copied(),
-                        &Palette99::pick(i),
-                    ))?;
+                    chart.draw_series(LineSeries::new(s.iter().copied(), &Palette99::pick(i)))?;
                 }
                 root.present()?;
                 Ok(())

@@ -61,7 +61,11 @@ impl Plugin for MarblePhysicsPlugin {
         app.add_schedule(substep_schedule());
         app.configure_sets(
             self.schedule,
-            (MarblePluginSystems::Step, MarblePluginSystems::SyncTransforms).chain(),
+            (
+                MarblePluginSystems::Step,
+                MarblePluginSystems::SyncTransforms,
+            )
+                .chain(),
         );
         app.add_systems(
             self.schedule,

@@ -20,8 +20,10 @@
 //!    resting marble, whose gravity-induced speed `g·h` may well exceed the threshold, is
 //!    never mistaken for an impact. Several touches are solved together by a few
 //!    Gauss–Seidel passes that enforce every `u_n ≥ target`.
-//! 3. **Constrained acceleration.** For every touch the marble is not leaving, the part of
-//!    the acceleration that pushes into the board is removed. A resting marble therefore
+//! 3. **Constrained acceleration.** For every touch the marble is not leaving, the marble
+//!    is put on the surface (it is within the touching tolerance of it), its residual normal
+//!    speed relative to the board is removed, and so is the part of the acceleration that
+//!    pushes into the board. A resting marble therefore
 //!    stays exactly where it is (no sinking, no correction, no jitter), and a marble on a
 //!    smooth incline follows its surface exactly (`s = ½ g sinθ t²` with Verlet).
 //! 4. **Continuous collision** (`ccd`): the earliest impact along the integrator's path with
@@ -119,7 +121,7 @@ pub fn resolve(
 
     loop {
         respond(&touches, &mut v, p.threshold, boards, t, contacts);
-        let a = constrained_acceleration(&touches, v, m.a, sep);
+        let a = settle(&touches, &mut x, &mut v, m.a, sep);
         let span = p.h - t;
         if span <= 0.0 {
             break;
@@ -234,15 +236,28 @@ fn respond(
     }
 }
 
-/// Step 3 of the module docs: the acceleration without its components into boards the
-/// marble rests on.
+/// Step 3 of the module docs: for every touch the marble is not leaving (normal speed
+/// relative to the board within `sep`), the marble is put on the surface (it is within the
+/// touching tolerance, so this moves it by less than that), its residual normal speed
+/// relative to the board is removed, and so is the part of the acceleration that pushes
+/// into the board. Returns that constrained acceleration. Without the first two, rounding
+/// would let a resting or sliding marble drift off its surface by ulps per step.
 #[inline]
-fn constrained_acceleration(touches: &TouchList, v: Vec3, a: Vec3, sep: f32) -> Vec3 {
+fn settle(touches: &TouchList, x: &mut Vec3, v: &mut Vec3, a: Vec3, sep: f32) -> Vec3 {
     let mut a = a;
+    for tc in touches.as_slice() {
+        let u = (*v - tc.board_velocity).dot(tc.normal);
+        if u <= sep {
+            if tc.gap > 0.0 {
+                *x -= tc.gap * tc.normal;
+            }
+            *v -= u * tc.normal;
+        }
+    }
     for _ in 0..4 {
         let mut changed = false;
         for tc in touches.as_slice() {
-            if (v - tc.board_velocity).dot(tc.normal) <= sep {
+            if (*v - tc.board_velocity).dot(tc.normal) <= sep {
                 let an = a.dot(tc.normal);
                 if an < 0.0 {
                     a -= an * tc.normal;

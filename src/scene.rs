@@ -490,7 +490,11 @@ fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Result<(), Scene
         }
         ShapeDesc::Compound(parts) => {
             if !top {
-                return invalid(field, "not a Compound (parts are not compounds)", "Compound");
+                return invalid(
+                    field,
+                    "not a Compound (parts are not compounds)",
+                    "Compound",
+                );
             }
             if parts.is_empty() {
                 return invalid(&format!("{field}.Compound"), "non-empty", "[]");

@@ -34,8 +34,7 @@ pub fn prepare_boards(
     let cache = cache.as_mut();
     cache.h = h;
     cache.boards.clear();
-    for (entity, collider, position, rotation, velocity, angular, restitution, friction) in
-        &boards
+    for (entity, collider, position, rotation, velocity, angular, restitution, friction) in &boards
     {
         let local = collider.0.local_aabb();
         let reach = local.map_or(f32::INFINITY, |a| a.mins.abs().max(a.maxs.abs()).length());
@@ -48,10 +47,7 @@ pub fn prepare_boards(
             } else {
                 // Turning: everything within `reach` of the origin's path.
                 let r = Vec3::splat(reach);
-                Aabb::new(
-                    position.0.min(end_pos) - r,
-                    position.0.max(end_pos) + r,
-                )
+                Aabb::new(position.0.min(end_pos) - r, position.0.max(end_pos) + r)
             }
         });
         cache.boards.push(BoardSnapshot {

@@ -3,8 +3,8 @@
 use bevy_ecs::prelude::*;
 
 use crate::components::{
-    Acceleration, Contact, ContactKind, Contacts, Marble, Pending, Position, Quarantined,
-    Radius, Restitution, StepStart,
+    Acceleration, Contact, ContactKind, Contacts, Marble, Pending, Position, Quarantined, Radius,
+    Restitution, StepStart,
 };
 use crate::config::StepConfig;
 use crate::narrow::{BoardCache, Path, TouchList, earliest_impact, gather, touch_tolerance};

@@ -3,8 +3,8 @@
 use bevy_ecs::prelude::*;
 
 use crate::components::{
-    Acceleration, Contacts, Marble, Pending, Position, Quarantined, Radius, Restitution,
-    StepStart, Velocity,
+    Acceleration, Contacts, Marble, Pending, Position, Quarantined, Radius, Restitution, StepStart,
+    Velocity,
 };
 use crate::config::StepConfig;
 use crate::narrow::{BoardCache, TouchList, gather, touch_tolerance};
