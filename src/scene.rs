@@ -260,7 +260,9 @@ impl Scene {
 
     /// Parses and validates a RON scene.
     pub fn from_ron_str(text: &str) -> Result<Scene, SceneError> {
+        // `mass: 0.01` rather than `mass: Some(0.01)`.
         let scene: Scene = ron::Options::default()
+            .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
             .from_str(text)
             .map_err(|e| SceneError::Parse(e.to_string()))?;
         scene.validate()?;
@@ -277,8 +279,9 @@ impl Scene {
 
     /// The scene as pretty RON.
     pub fn to_ron_string(&self) -> String {
-        ron::ser::to_string_pretty(self, ron::ser::PrettyConfig::default())
-            .expect("scenes always serialize")
+        let config = ron::ser::PrettyConfig::default()
+            .extensions(ron::extensions::Extensions::IMPLICIT_SOME);
+        ron::ser::to_string_pretty(self, config).expect("scenes always serialize")
     }
 
     /// The scene as pretty JSON.

@@ -71,7 +71,11 @@ fn translating_and_tilted_boards() {
     let cases = [
         ("static", Quat::IDENTITY, Vec3::ZERO),
         ("along the normal", Quat::IDENTITY, Vec3::new(0.0, 2.0, 0.0)),
-        ("across the normal", Quat::IDENTITY, Vec3::new(3.0, 0.0, -1.0)),
+        (
+            "across the normal",
+            Quat::IDENTITY,
+            Vec3::new(3.0, 0.0, -1.0),
+        ),
         ("tilted", tilt, Vec3::ZERO),
         ("tilted, moving", tilt, Vec3::new(1.0, 0.5, 0.0)),
     ];
@@ -108,7 +112,11 @@ fn impact_time_on_a_moving_board() {
     );
     let (c, t) = first.expect("collision");
     assert!((t - 0.5 / 5.0).abs() <= 1e-5, "impact at {t}");
-    assert!((c.point.y - 2.0 * t).abs() <= 1e-5, "contact point {}", c.point);
+    assert!(
+        (c.point.y - 2.0 * t).abs() <= 1e-5,
+        "contact point {}",
+        c.point
+    );
 }
 
 /// A rotating board (a plane turning about Z through the origin at 1 rad/s) hit 0.5 m
@@ -123,8 +131,16 @@ fn rotating_board() {
     let (sim, first) = shoot(Quat::IDENTITY, Vec3::ZERO, spin, start, vm, true, 40);
     let (c, t) = first.expect("collision");
     let n = Quat::from_rotation_z(t) * Vec3::Y;
-    assert!((c.normal - n).length() <= 1e-5, "normal {} against {n}", c.normal);
-    assert!(c.point.dot(n).abs() <= 1e-5, "point {} off the plane", c.point);
+    assert!(
+        (c.normal - n).length() <= 1e-5,
+        "normal {} against {n}",
+        c.normal
+    );
+    assert!(
+        c.point.dot(n).abs() <= 1e-5,
+        "point {} off the plane",
+        c.point
+    );
     let vb = spin.cross(c.point);
     let want = equation_1(vm, vb, n, E);
     let (_, got) = sim.marble_state(0);
@@ -160,7 +176,11 @@ fn rising_board_carries_a_resting_marble() {
         sim.step();
         let t = step as f32 / 60.0;
         let (x, v) = sim.marble_state(0);
-        assert!((x.y - (0.1 + R + t)).abs() <= 1e-5, "step {step}: y = {}", x.y);
+        assert!(
+            (x.y - (0.1 + R + t)).abs() <= 1e-5,
+            "step {step}: y = {}",
+            x.y
+        );
         assert!((v - Vec3::Y).length() <= 1e-5, "step {step}: v = {v}");
         assert!(!sim.world().get::<Contacts>(marble).unwrap().has_collision());
     }

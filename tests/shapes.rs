@@ -125,7 +125,10 @@ fn no_ghost_bumps_on_internal_edges() {
         sim.step();
         let (x, v) = sim.marble_state(0);
         assert!((x.y - R).abs() <= 2e-6, "step {step}: y = {}", x.y);
-        assert!((v - Vec3::new(1.6, 0.0, 1.2)).length() <= 1e-5, "step {step}: v = {v}");
+        assert!(
+            (v - Vec3::new(1.6, 0.0, 1.2)).length() <= 1e-5,
+            "step {step}: v = {v}"
+        );
         assert!(!sim.world().get::<Contacts>(marble).unwrap().has_collision());
     }
 }

@@ -1,0 +1,52 @@
+//! Stepping allocates nothing once warmed up (its own test binary: the counting allocator
+//! sees every thread of the process, so no other test may run beside it).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use bevy_marble::prelude::*;
+use bevy_marble::scenes;
+
+/// Counts heap allocations made by this test binary.
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator unchanged, only counting calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Once warmed up, stepping allocates nothing: 100 steps of 1,000 marbles on the walled
+/// board (contacts, walls, CCD) and of the tilting labyrinth scene.
+#[test]
+fn stepping_does_not_allocate() {
+    for scene in [scenes::walled_board(1000), scenes::default_scene()] {
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        for _ in 0..10 {
+            sim.step();
+        }
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        for _ in 0..100 {
+            sim.step();
+        }
+        let after = ALLOCATIONS.load(Ordering::Relaxed);
+        assert_eq!(after - before, 0, "allocations during 100 steps");
+    }
+}

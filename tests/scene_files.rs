@@ -1,0 +1,350 @@
+//! Scene files (RON and JSON, defaults, validation messages) and the `marble` command
+//! line (outputs, exit codes, determinism).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use bevy_marble::prelude::*;
+use bevy_marble::scenes;
+
+const CONTRACT_RON: &str = r#"(
+    dt: 0.004166667,
+    boards: [(shape: Plane(()), restitution: 0.8)],
+    marbles: [(position: (0.0, 1.008, 0.0), radius: 0.008, restitution: 0.8)],
+)"#;
+
+const CONTRACT_JSON: &str = r#"{"dt": 0.004166667,
+ "boards": [{"shape": {"Plane": {}}, "restitution": 0.8}],
+ "marbles": [{"position": [0, 1.008, 0], "radius": 0.008, "restitution": 0.8}]}"#;
+
+#[test]
+fn contract_examples_load_identically_with_defaults() {
+    let ron = Scene::from_ron_str(CONTRACT_RON).unwrap();
+    let json = Scene::from_json_str(CONTRACT_JSON).unwrap();
+    assert_eq!(ron, json);
+    assert_eq!(ron.gravity, [0.0, -9.81, 0.0]);
+    assert_eq!(ron.substeps, 1);
+    assert_eq!(ron.integrator, Integrator::SemiImplicitEuler);
+    assert!(ron.ccd && !ron.rolling && !ron.marble_collisions);
+    assert_eq!(ron.restitution_threshold, 0.05);
+    assert_eq!(ron.duration, 10.0);
+    let b = &ron.boards[0];
+    assert_eq!(
+        (
+            b.position,
+            b.rotation,
+            b.velocity,
+            b.angular_velocity,
+            b.friction
+        ),
+        ([0.0; 3], [0.0, 0.0, 0.0, 1.0], [0.0; 3], [0.0; 3], 0.5)
+    );
+    let m = &ron.marbles[0];
+    assert_eq!((m.velocity, m.mass, m.friction), ([0.0; 3], None, 0.5));
+    // Default mass: glass, 2500 kg/m³ × 4/3 π r³.
+    let sim = Simulation::from_scene(&ron).unwrap();
+    let mass = sim.world().get::<Mass>(sim.marbles()[0]).unwrap().get();
+    let want = 2500.0 * 4.0 / 3.0 * std::f32::consts::PI * 0.008f32.powi(3);
+    assert!((mass - want).abs() <= 1e-6 * want);
+}
+
+#[test]
+fn every_shape_parses_in_both_formats() {
+    let ron = r#"(boards: [
+        (shape: Plane(())),
+        (shape: Cuboid(half_extents: (1.0, 0.1, 1.0)), position: (0.0, 1.0, 0.0)),
+        (shape: TriMesh(vertices: [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)], indices: [(0, 1, 2)])),
+        (shape: HeightField(heights: [[0.0, 0.1], [0.2, 0.3]], scale: (1.0, 1.0, 1.0))),
+        (shape: Compound([(shape: Cuboid(half_extents: (1.0, 1.0, 1.0)), position: (0.0, -1.0, 0.0))])),
+    ])"#;
+    let json = r#"{"boards": [
+        {"shape": {"Plane": {}}},
+        {"shape": {"Cuboid": {"half_extents": [1, 0.1, 1]}}, "position": [0, 1, 0]},
+        {"shape": {"TriMesh": {"vertices": [[0, 0, 0], [1, 0, 0], [0, 0, 1]], "indices": [[0, 1, 2]]}}},
+        {"shape": {"HeightField": {"heights": [[0, 0.1], [0.2, 0.3]], "scale": [1, 1, 1]}}},
+        {"shape": {"Compound": [{"shape": {"Cuboid": {"half_extents": [1, 1, 1]}}, "position": [0, -1, 0]}]}}
+    ]}"#;
+    let a = Scene::from_ron_str(ron).unwrap();
+    let b = Scene::from_json_str(json).unwrap();
+    assert_eq!(a, b);
+    Simulation::from_scene(&a).unwrap();
+}
+
+#[test]
+fn default_scene_round_trips_through_ron_and_json() {
+    let s = scenes::default_scene();
+    assert_eq!(Scene::from_ron_str(&s.to_ron_string()).unwrap(), s);
+    assert_eq!(Scene::from_json_str(&s.to_json_string()).unwrap(), s);
+}
+
+/// Each invalid scene is refused with the field path and value in the message.
+#[test]
+fn invalid_scenes_name_field_and_value() {
+    let cases: &[(&str, &str)] = &[
+        ("(dt: 0.0)", "dt must be > 0, got 0"),
+        ("(dt: -0.1)", "dt must be > 0, got -0.1"),
+        ("(dt: NaN)", "dt must be > 0, got NaN"),
+        ("(substeps: 0)", "substeps must be >= 1, got 0"),
+        (
+            "(gravity: (0.0, inf, 0.0))",
+            "gravity must be finite, got [0.0, inf, 0.0]",
+        ),
+        (
+            "(restitution_threshold: -1.0)",
+            "restitution_threshold must be >= 0, got -1",
+        ),
+        ("(duration: -1.0)", "duration must be >= 0, got -1"),
+        (
+            "(marbles: [(position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0), radius: -0.01)])",
+            "marbles[3].radius must be > 0, got -0.01",
+        ),
+        (
+            "(marbles: [(position: (0.0, NaN, 0.0))])",
+            "marbles[0].position must be finite, got [0.0, NaN, 0.0]",
+        ),
+        (
+            "(marbles: [(position: (0.0, 0.0, 0.0), radius: 0.0)])",
+            "marbles[0].radius must be > 0, got 0",
+        ),
+        (
+            "(marbles: [(position: (0.0, 0.0, 0.0), mass: 0.0)])",
+            "marbles[0].mass must be > 0, got 0",
+        ),
+        (
+            "(marbles: [(position: (0.0, 0.0, 0.0), mass: -2.0)])",
+            "marbles[0].mass must be > 0, got -2",
+        ),
+        (
+            "(marbles: [(position: (0.0, 0.0, 0.0), restitution: 1.5)])",
+            "marbles[0].restitution must be in [0, 1], got 1.5",
+        ),
+        (
+            "(marbles: [(position: (0.0, 0.0, 0.0), restitution: -0.1)])",
+            "marbles[0].restitution must be in [0, 1], got -0.1",
+        ),
+        (
+            "(marbles: [(position: (0.0, 0.0, 0.0), friction: -1.0)])",
+            "marbles[0].friction must be >= 0, got -1",
+        ),
+        (
+            "(marbles: [(position: (0.0, 0.0, 0.0), velocity: (inf, 0.0, 0.0))])",
+            "marbles[0].velocity must be finite, got [inf, 0.0, 0.0]",
+        ),
+        (
+            "(boards: [(shape: Plane(()), restitution: 2.0)])",
+            "boards[0].restitution must be in [0, 1], got 2",
+        ),
+        (
+            "(boards: [(shape: Plane(()), rotation: (0.0, 0.0, 0.0, 0.0))])",
+            "boards[0].rotation must be a non-zero quaternion, got [0.0, 0.0, 0.0, 0.0]",
+        ),
+        (
+            "(boards: [(shape: Plane(()), position: (NaN, 0.0, 0.0))])",
+            "boards[0].position must be finite, got [NaN, 0.0, 0.0]",
+        ),
+        (
+            "(boards: [(shape: Cuboid(half_extents: (1.0, 0.0, 1.0)))])",
+            "boards[0].shape.Cuboid.half_extents.y must be > 0, got 0",
+        ),
+        (
+            "(boards: [(shape: TriMesh(vertices: [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)], indices: [(0, 1, 3)]))])",
+            "boards[0].shape.TriMesh.indices[0][2] must be < 3 (the number of vertices), got 3",
+        ),
+        (
+            "(boards: [(shape: TriMesh(vertices: [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (2.0, 0.0, 0.0)], indices: [(0, 1, 2)]))])",
+            "boards[0].shape.TriMesh.indices[0] must be a triangle of non-zero area, got [0, 1, 2]",
+        ),
+        (
+            "(boards: [(shape: TriMesh(vertices: [], indices: []))])",
+            "boards[0].shape.TriMesh.indices must be non-empty, got []",
+        ),
+        (
+            "(boards: [(shape: HeightField(heights: [[0.0, 0.0], [0.0]], scale: (1.0, 1.0, 1.0)))])",
+            "boards[0].shape.HeightField.heights[1] must be 2 long like row 0, got 1",
+        ),
+        (
+            "(boards: [(shape: HeightField(heights: [[0.0, 0.0]], scale: (1.0, 1.0, 1.0)))])",
+            "boards[0].shape.HeightField.heights must be at least 2 rows, got 1",
+        ),
+        (
+            "(boards: [(shape: HeightField(heights: [[0.0, 0.0], [0.0, 0.0]], scale: (1.0, -1.0, 1.0)))])",
+            "boards[0].shape.HeightField.scale.y must be > 0, got -1",
+        ),
+        (
+            "(boards: [(shape: Compound([(shape: Compound([(shape: Plane(()))]))]))])",
+            "boards[0].shape.Compound[0].shape must be not a Compound (parts are not compounds), got Compound",
+        ),
+        (
+            "(rolling: true)",
+            "rolling: rolling (spin and friction) is not yet supported",
+        ),
+        (
+            "(marble_collisions: true)",
+            "marble_collisions: marble-marble collision is not yet supported",
+        ),
+    ];
+    for (text, message) in cases {
+        let err = Scene::from_ron_str(text).expect_err(text);
+        assert_eq!(&err.to_string(), message, "for {text}");
+    }
+}
+
+#[test]
+fn syntax_errors_and_unknown_fields_are_refused() {
+    let e = Scene::from_ron_str("(dt: 0.1, wobble: 3)").unwrap_err();
+    assert!(e.to_string().contains("wobble"), "{e}");
+    let e =
+        Scene::from_json_str(r#"{"marbles": [{"position": [0, 0, 0], "colour": 1}]}"#).unwrap_err();
+    assert!(e.to_string().contains("colour"), "{e}");
+    let e = Scene::from_ron_str("(dt: 0.1,").unwrap_err();
+    assert!(matches!(e, SceneError::Parse(_)), "{e}");
+    let e = Scene::from_json_str(r#"{"marbles": [{}]}"#).unwrap_err();
+    assert!(e.to_string().contains("position"), "{e}");
+    let e = Scene::from_path("/nonexistent/scene.ron").unwrap_err();
+    assert!(matches!(e, SceneError::Io(_)), "{e}");
+    let e = Scene::from_path("scene.yaml").unwrap_err();
+    assert!(matches!(e, SceneError::Format(_)), "{e}");
+}
+
+// ---------------------------------------------------------------- the command line
+
+fn marble(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_marble"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("marble runs")
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("bevy_marble_cli_{name}_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn cli_run_writes_the_contract_csv_deterministically() {
+    let dir = temp_dir("run");
+    std::fs::write(dir.join("drop.ron"), CONTRACT_RON).unwrap();
+    let args = [
+        "run", "drop.ron", "--steps", "25", "--every", "10", "--csv", "a.csv", "--quiet",
+    ];
+    let o = marble(&args, &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(dir.join("a.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], "step,time,marble,x,y,z,vx,vy,vz,wx,wy,wz");
+    assert_eq!(lines[1], "0,0,0,0,1.008,0,0,0,0,0,0,0");
+    let steps: Vec<&str> = lines[1..]
+        .iter()
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert_eq!(steps, ["0", "10", "20", "25"]);
+    // Time is step × dt and every number parses back to f32.
+    for l in &lines[1..] {
+        let f: Vec<f32> = l.split(',').map(|x| x.parse().unwrap()).collect();
+        assert!((f[1] - f[0] * 0.004166667).abs() <= 1e-6);
+    }
+    let o = marble(
+        &[
+            "run", "drop.ron", "--steps", "25", "--every", "10", "--csv", "b.csv", "--quiet",
+        ],
+        &dir,
+    );
+    assert!(o.status.success());
+    assert_eq!(csv, std::fs::read_to_string(dir.join("b.csv")).unwrap());
+    // JSON gives the same bytes.
+    std::fs::write(dir.join("drop.json"), CONTRACT_JSON).unwrap();
+    let o = marble(
+        &[
+            "run",
+            "drop.json",
+            "--steps",
+            "25",
+            "--every",
+            "10",
+            "--csv",
+            "c.csv",
+            "--quiet",
+        ],
+        &dir,
+    );
+    assert!(o.status.success());
+    assert_eq!(csv, std::fs::read_to_string(dir.join("c.csv")).unwrap());
+    // A plot.
+    let o = marble(
+        &[
+            "run", "drop.ron", "--steps", "25", "--plot", "p.svg", "--quiet",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        std::fs::read_to_string(dir.join("p.svg"))
+            .unwrap()
+            .starts_with("<svg")
+    );
+}
+
+#[test]
+fn cli_bad_input_exits_2_with_one_line_and_no_output() {
+    let dir = temp_dir("bad");
+    std::fs::write(
+        dir.join("scene.ron"),
+        "(marbles: [(position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0), radius: -0.01)])",
+    )
+    .unwrap();
+    std::fs::write(dir.join("syntax.json"), "{\"dt\": ").unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["run", "scene.ron", "--csv", "out.csv"],
+            "error: scene.ron: marbles[3].radius must be > 0, got -0.01",
+        ),
+        (
+            &["check", "scene.ron"],
+            "error: scene.ron: marbles[3].radius must be > 0, got -0.01",
+        ),
+        (&["check", "syntax.json"], "error: syntax.json: "),
+        (
+            &["check", "missing.ron"],
+            "error: missing.ron: cannot read the file",
+        ),
+        (&["run", "scene.ron", "--every", "0"], "error: "),
+        (&["run", "--wobble"], "error: "),
+    ];
+    for (args, start) in cases {
+        let o = marble(args, &dir);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        let err = stderr(&o);
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(err.starts_with(start), "{args:?}: {err}");
+    }
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.contains("out"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn cli_check_scene_and_default_run() {
+    let dir = temp_dir("default");
+    let o = marble(&["scene"], &dir);
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert_eq!(Scene::from_ron_str(&text).unwrap(), scenes::default_scene());
+    std::fs::write(dir.join("default.ron"), &text).unwrap();
+    let o = marble(&["check", "default.ron"], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = marble(&[], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(dir.join("marble-out/default.csv")).unwrap();
+    assert!(csv.starts_with("step,time,marble,"));
+    assert!(dir.join("marble-out/default.svg").exists());
+}
