@@ -79,9 +79,9 @@ pub enum PartShape {
     /// A solid box centred on the part's origin.
     Cuboid(Cuboid),
     /// A triangle mesh; both faces collide.
-    TriMesh(TriMesh),
+    TriMesh(Box<TriMesh>),
     /// A height field centred on the part's origin.
-    HeightField(HeightField),
+    HeightField(Box<HeightField>),
 }
 
 /// A shape with its pose in the board's frame.

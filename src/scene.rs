@@ -389,13 +389,13 @@ impl ShapeDesc {
             ShapeDesc::Cuboid { half_extents } => {
                 PartShape::Cuboid(Cuboid::new(Vec3::from_array(*half_extents)))
             }
-            ShapeDesc::TriMesh { vertices, indices } => PartShape::TriMesh(
+            ShapeDesc::TriMesh { vertices, indices } => PartShape::TriMesh(Box::new(
                 TriMesh::new(
                     vertices.iter().map(|v| Vec3::from_array(*v)).collect(),
                     indices.clone(),
                 )
                 .expect("validated mesh"),
-            ),
+            )),
             ShapeDesc::HeightField { heights, scale } => {
                 let nrows = heights.len();
                 let ncols = heights[0].len();
@@ -406,10 +406,10 @@ impl ShapeDesc {
                         data[i + j * nrows] = *h;
                     }
                 }
-                PartShape::HeightField(HeightField::new(
+                PartShape::HeightField(Box::new(HeightField::new(
                     Array2::new(nrows, ncols, data),
                     Vec3::from_array(*scale),
-                ))
+                )))
             }
             ShapeDesc::Compound(_) => unreachable!("validation refuses nested compounds"),
         }

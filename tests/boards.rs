@@ -1,11 +1,8 @@
 //! Equation (1) against boards that translate along and across their normal, tilted boards
 //! and rotating boards: `v' = v_m − (1 + e)((v_m − v_b(p))·n)n` with `v_b(p) = v + ω × (p − c)`.
 
-mod common;
-
 use bevy_marble::prelude::*;
 use bevy_marble::scene::PlaneDesc;
-use common::*;
 use glam::{Quat, Vec3};
 
 const R: f32 = 0.008;

@@ -56,7 +56,7 @@ proptest! {
         speed in 1.0f32..500.0,
         yaw in -1.0f32..1.0,
         pitch in -1.0f32..1.0,
-        wall_yaw in -3.14f32..3.14,
+        wall_yaw in -std::f32::consts::PI..std::f32::consts::PI,
         wall_pitch in -1.5f32..1.5,
         dt_inv in 30.0f32..1000.0,
     ) {
