@@ -7,16 +7,24 @@ use serde::{Deserialize, Serialize};
 /// Time integration of a marble's free motion over one substep.
 ///
 /// Forces are accumulated once per step and held constant over it, so within a substep a
-/// marble's acceleration `a` is constant. Each integrator also defines the *path* the marble
-/// follows inside the substep — the state it would reach after a shorter time `τ` — and
-/// continuous collision finds impacts on that path.
+/// marble's acceleration `a` is constant, and every integrator's update has the form
+/// `x' = x + v h + c·a h²`, `v' = v + a h`:
 ///
-/// | integrator | order | path inside a substep | energy over long runs | cost |
-/// | --- | --- | --- | --- | --- |
-/// | `ExplicitEuler` | 1 | `x + v τ` | grows | 1 evaluation |
-/// | `SemiImplicitEuler` | 1 | `x + (v + a τ) τ` | bounded | 1 |
-/// | `VelocityVerlet` | 2 | `x + v τ + ½ a τ²` (exact for constant `a`) | bounded | 1 |
-/// | `Rk4` | 4 | `x + v τ + ½ a τ²` (exact for constant `a`) | tiny drift | 4 |
+/// | integrator | order | `c` | reported velocity vs. the path's | energy over long runs | cost |
+/// | --- | --- | --- | --- | --- | --- |
+/// | `ExplicitEuler` | 1 | 0 | ½ a h ahead | grows for oscillators | 1 evaluation |
+/// | `SemiImplicitEuler` | 1 | 1 | ½ a h behind | bounded | 1 |
+/// | `VelocityVerlet` | 2 | ½ | exact | bounded | 1 |
+/// | `Rk4` | 4 | ½ | exact | tiny drift for oscillators | 4 |
+///
+/// Each is therefore the exact parabola `x + u τ + ½ a τ²` of a *path velocity*
+/// `u = v + δ` with `δ = (c − ½) a h` ([`Integrator::velocity_offset`]): semi-implicit
+/// Euler is the leapfrog scheme whose stored velocity is the path's half a step earlier,
+/// explicit Euler the same half a step later. Impacts and contacts inside a substep are
+/// resolved on that path (continuous collision finds impacts on it, equation (1) is applied
+/// to its velocity), so the response is exact for every integrator; what remains of the
+/// integrator's error is the `δ` offset of its velocities and of its free flight
+/// (`½ a h t` in position for the Euler schemes).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Integrator {
     /// Symplectic Euler: velocity first, then position with the new velocity. The default:
@@ -59,12 +67,15 @@ impl Integrator {
         }
     }
 
-    /// An upper bound on the marble's speed along its path during `[0, tau]`.
+    /// `δ = (c − ½) a h`: the path velocity is the reported velocity plus this (see the
+    /// type's docs). Zero for Verlet and RK4.
     #[inline]
-    pub fn speed_bound(self, v: Vec3, a: Vec3, tau: f32) -> f32 {
-        // SemiImplicitEuler's path `x + vτ + aτ²` has velocity `v + 2aτ`; the others
-        // `v + aτ` or `v`.
-        v.length() + 2.0 * a.length() * tau
+    pub fn velocity_offset(self, a: Vec3, h: f32) -> Vec3 {
+        match self {
+            Integrator::SemiImplicitEuler => a * (0.5 * h),
+            Integrator::ExplicitEuler => a * (-0.5 * h),
+            Integrator::VelocityVerlet | Integrator::Rk4 => Vec3::ZERO,
+        }
     }
 }
 

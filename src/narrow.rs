@@ -16,8 +16,9 @@
 //! # Time of impact
 //! Continuous collision asks, for each piece the marble does not yet touch, the first time
 //! `τ` in the substep at which `d(τ) = dist(x(τ), piece(τ)) − r` falls to `tol`, where
-//! `x(τ)` is the integrator's own path and the piece moves with its board (translation and
-//! rotation). It uses **conservative advancement**: if `|ḋ| ≤ L` on the interval, no root
+//! `x(τ)` is the marble's path (the parabola of constant acceleration every integrator
+//! follows, see [`Integrator`](crate::config::Integrator)) and the piece moves with its
+//! board (translation and rotation). It uses **conservative advancement**: if `|ḋ| ≤ L` on the interval, no root
 //! lies before `τ + (d − tol/2)/L`, so stepping by that amount never passes an impact; the
 //! bound `L` is the marble's speed bound along its path plus the board's speed at the
 //! farthest point the marble can reach. A head-on approach converges in one or two
@@ -30,7 +31,6 @@ use bevy_ecs::prelude::*;
 use glam::{Quat, Vec3};
 use parry3d::bounding_volume::Aabb;
 
-use crate::config::Integrator;
 use crate::geometry::{BoardGeometry, PieceId, transform_aabb};
 
 /// Conservative-advancement iterations per piece before giving up on convergence (the
@@ -288,17 +288,15 @@ pub fn gather(
     }
 }
 
-/// The path of a marble over part of a substep: state `(x, v)` at time `t0`, constant
-/// acceleration `a`, integrated by `integrator`.
+/// The path of a marble over part of a substep: centre `x` and path velocity `v` at time
+/// `t0` of the substep, constant acceleration `a`: `x(τ) = x + v τ + ½ a τ²`.
 #[derive(Clone, Copy, Debug)]
 pub struct Path {
-    /// Integrator defining the path.
-    pub integrator: Integrator,
     /// Time of the path's start within the substep, s.
     pub t0: f32,
     /// Centre at `t0`.
     pub x: Vec3,
-    /// Velocity at `t0`.
+    /// Path velocity at `t0`.
     pub v: Vec3,
     /// Acceleration.
     pub a: Vec3,
@@ -308,7 +306,13 @@ impl Path {
     /// Centre at `t0 + tau`.
     #[inline]
     pub fn position(&self, tau: f32) -> Vec3 {
-        self.integrator.advance(self.x, self.v, self.a, tau).0
+        self.x + self.v * tau + self.a * (0.5 * tau * tau)
+    }
+
+    /// Centre and velocity at `t0 + tau`.
+    #[inline]
+    pub fn state(&self, tau: f32) -> (Vec3, Vec3) {
+        (self.position(tau), self.v + self.a * tau)
     }
 }
 
@@ -322,14 +326,14 @@ pub fn earliest_impact(
     tol: f32,
 ) -> Option<(f32, PieceId)> {
     let end = path.position(span);
-    // Bounds of the path: the chord plus the largest bulge of any integrator's path.
-    let bulge = path.a.length() * span * span;
+    // Bounds of the path: the chord plus the parabola's bulge (⅛ |a| span², rounded up).
+    let bulge = 0.25 * path.a.length() * span * span;
     let reach = r + tol + bulge;
     let world = Aabb::new(
         path.x.min(end) - Vec3::splat(reach),
         path.x.max(end) + Vec3::splat(reach),
     );
-    let marble_speed = path.integrator.speed_bound(path.v, path.a, span);
+    let marble_speed = path.v.length() + path.a.length() * span;
     let hint = -path.v;
     let mut best: Option<(f32, PieceId)> = None;
 

@@ -26,14 +26,17 @@
 //!    pushes into the board. A resting marble therefore
 //!    stays exactly where it is (no sinking, no correction, no jitter), and a marble on a
 //!    smooth incline follows its surface exactly (`s = ½ g sinθ t²` with Verlet).
-//! 4. **Continuous collision** (`ccd`): the earliest impact along the integrator's path with
-//!    a piece not touched yet ([`crate::narrow::earliest_impact`]); advance to it and go to 1.
+//! 4. **Continuous collision** (`ccd`): the earliest impact along the marble's path (the
+//!    exact parabola of its integrator's *path velocity*, see
+//!    [`Integrator`](crate::config::Integrator)) with a piece not touched yet ([`crate::narrow::earliest_impact`]); advance to it and go to 1.
 //!    Without `ccd`, or when no impact remains, integrate to `h`.
 //! 5. **End of substep.** Any penetration left (boards that turned into the marble, marbles
-//!    spawned inside a board, or every impact when `ccd` is off) is resolved in position by
-//!    projecting the centre out along the normal — no velocity is added for it, so no energy
-//!    is injected — and in velocity by the same collision-or-contact rule, using the
-//!    closing speed before this step's forces.
+//!    spawned inside a board, or every impact when `ccd` is off) is resolved by the same
+//!    collision-or-contact rule, judged on the closing speed `u0` before this step's forces,
+//!    and without adding energy: the centre is projected onto the surface (no velocity is
+//!    added for it), and a collision found this late leaves with normal speed `−e·u0` —
+//!    equation (1) on the approach speed, not on the end speed, which carries the gravity of
+//!    the time spent inside the board.
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever stops at its last safe position for the rest of the
@@ -101,60 +104,68 @@ pub fn resolve(
 ) -> (Vec3, Vec3) {
     let tol = crate::narrow::touch_tolerance(p.tolerance, m.r, m.x0);
     let sep = separation_speed(p.threshold);
+    let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut touches = TouchList::default();
     let mut t = 0.0f32;
     let mut x = m.x0;
+    // The integrator's reported velocity until converted: collisions and contacts at the
+    // start are judged on the velocity before this step's forces.
     let mut v = m.v0;
     let mut impacts = 0;
     contacts.clear();
 
-    match found {
-        Found::Touching(start) => touches = *start,
+    // From here on `v` is the path velocity (see `Integrator`), and `a` the acceleration
+    // left after the constraints of the touches the marble rests on.
+    let mut a = match found {
+        Found::Touching(start) => {
+            touches = *start;
+            respond(&touches, &mut v, p.threshold, boards, 0.0, contacts);
+            let a = settle(&touches, &mut x, &mut v, m.a, sep);
+            v += offset(a);
+            a
+        }
         Found::Impact(tau) => {
-            (x, v) = p.integrator.advance(x, v, m.a, tau);
+            v += offset(m.a);
+            (x, v) = free_path(x, v, m.a, tau);
             t = tau;
             impacts = 1;
             gather(boards, t, x, m.r, tol, m.restitution, -v, &mut touches);
+            respond(&touches, &mut v, p.threshold, boards, t, contacts);
+            settle(&touches, &mut x, &mut v, m.a, sep)
         }
-        Found::Overlap => {}
-    }
+        Found::Overlap => {
+            v += offset(m.a);
+            m.a
+        }
+    };
 
-    loop {
-        respond(&touches, &mut v, p.threshold, boards, t, contacts);
-        let a = settle(&touches, &mut x, &mut v, m.a, sep);
+    while t < p.h {
         let span = p.h - t;
-        if span <= 0.0 {
-            break;
-        }
         if p.ccd {
             if impacts >= p.max_impacts {
                 // Wedged: stay at the last safe position for the rest of the substep.
                 break;
             }
-            let path = Path {
-                integrator: p.integrator,
-                t0: t,
-                x,
-                v,
-                a,
-            };
+            let path = Path { t0: t, x, v, a };
             if let Some((tau, _)) = earliest_impact(boards, &path, span, m.r, tol) {
-                (x, v) = p.integrator.advance(x, v, a, tau);
+                (x, v) = path.state(tau);
                 t += tau;
                 impacts += 1;
                 gather(boards, t, x, m.r, tol, m.restitution, -v, &mut touches);
+                respond(&touches, &mut v, p.threshold, boards, t, contacts);
+                a = settle(&touches, &mut x, &mut v, m.a, sep);
                 continue;
             }
         }
-        (x, v) = p.integrator.advance(x, v, a, span);
+        (x, v) = free_path(x, v, a, span);
         break;
     }
 
-    // End of substep: resolve what still overlaps.
+    // End of substep: resolve what still overlaps, or touches while approaching.
     gather(boards, p.h, x, m.r, tol, m.restitution, -v, &mut touches);
     for tc in touches.as_slice() {
         let u = (v - tc.board_velocity).dot(tc.normal);
-        if tc.gap >= 0.0 {
+        if tc.gap >= 0.0 && u >= 0.0 {
             record(contacts, boards, tc, ContactKind::Contact, u, p.h);
             continue;
         }
@@ -165,19 +176,30 @@ pub fn resolve(
         } else {
             ContactKind::Contact
         };
-        if u < 0.0 {
-            let e = if kind == ContactKind::Collision {
-                tc.restitution
-            } else {
-                0.0
-            };
-            // Equation (1): v' = v − (1 + e) ((v − v_b)·n) n.
-            v -= (1.0 + e) * u * tc.normal;
+        if kind == ContactKind::Collision {
+            // Found late (no CCD): the end velocity carries the gravity of the time spent
+            // inside the board, so equation (1) takes the approach speed before this step's
+            // forces: the normal speed after is `−e·u0`, never more than came in.
+            v += (-tc.restitution * u0 - u) * tc.normal;
+        } else if u < 0.0 {
+            v -= u * tc.normal;
         }
-        x -= tc.gap * tc.normal;
+        if tc.gap < 0.0 {
+            // Onto the surface; no velocity is added for it.
+            x -= tc.gap * tc.normal;
+        }
         record(contacts, boards, tc, kind, if p.ccd { u } else { u0 }, p.h);
     }
-    (x, v)
+    // Back from the path velocity to the integrator's, with the acceleration the marble
+    // is left with.
+    let a_end = settle(&touches, &mut x, &mut v, m.a, sep);
+    (x, v - offset(a_end))
+}
+
+/// The exact path of constant acceleration: `(x + v τ + ½ a τ², v + a τ)`.
+#[inline]
+fn free_path(x: Vec3, v: Vec3, a: Vec3, tau: f32) -> (Vec3, Vec3) {
+    (x + v * tau + a * (0.5 * tau * tau), v + a * tau)
 }
 
 /// Below this normal speed (m/s) a marble is not leaving the surface it touches.

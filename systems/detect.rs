@@ -71,10 +71,9 @@ pub fn detect_contacts(
             contacts.pending = Pending::Touching;
         } else if config.ccd {
             let path = Path {
-                integrator: config.integrator,
                 t0: 0.0,
                 x: start.position,
-                v: start.velocity,
+                v: start.velocity + config.integrator.velocity_offset(acceleration.0, h),
                 a: acceleration.0,
             };
             if let Some((tau, _)) = earliest_impact(boards, &path, h, r, tol) {
