@@ -28,7 +28,7 @@
 //!    smooth incline follows its surface exactly (`s = ½ g sinθ t²` with Verlet).
 //! 4. **Continuous collision** (`ccd`): the earliest impact along the marble's path (the
 //!    exact parabola of its integrator's *path velocity*, see
-//!    [`Integrator`](crate::config::Integrator)) with a piece not touched yet ([`crate::narrow::earliest_impact`]); advance to it and go to 1.
+//!    [`Integrator`]) with a piece not touched yet ([`crate::narrow::earliest_impact`]); advance to it and go to 1.
 //!    Without `ccd`, or when no impact remains, integrate to `h`.
 //! 5. **End of substep.** Any penetration left (boards that turned into the marble, marbles
 //!    spawned inside a board, or every impact when `ccd` is off) is resolved by the same
