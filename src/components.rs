@@ -87,9 +87,31 @@ impl Default for Rotation {
     Restitution,
     Friction,
     StepStart,
-    Contacts
+    Contacts,
+    PositionCarry
 )]
 pub struct Marble;
+
+/// The part of a marble's position that f32 could not hold: the compensation term of
+/// Kahan summation, kept so that many small steps add up exactly. Far from the origin (at
+/// 10 km an f32 resolves 1 mm) or at tiny steps (1e-6 s moves a marble a fraction of an
+/// f32 ulp), plain accumulation would lose most of the motion. The position is
+/// `Position − PositionCarry` to about an ulp of the carry; writing `Position` directly is
+/// fine (the carry is at most an ulp of the old position).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct PositionCarry(pub Vec3);
+
+/// `sum + delta` with Kahan's compensation `carry`: returns the new sum and carry. With
+/// `compensated` false, plain f32 addition (the carry stays zero).
+#[inline]
+pub fn compensated_add(compensated: bool, sum: Vec3, carry: Vec3, delta: Vec3) -> (Vec3, Vec3) {
+    if !compensated {
+        return (sum + delta, Vec3::ZERO);
+    }
+    let y = delta - carry;
+    let t = sum + y;
+    (t, (t - sum) - y)
+}
 
 /// Marks a board: a kinematic body with a [`Collider`] shape.
 #[derive(Component, Clone, Copy, Debug, Default)]
@@ -196,6 +218,8 @@ impl Default for Friction {
 pub struct StepStart {
     /// Centre at the start of the substep, m.
     pub position: Vec3,
+    /// The position's [`PositionCarry`] at the start of the substep.
+    pub carry: Vec3,
     /// Velocity at the start of the substep, before this step's forces, m/s.
     pub velocity: Vec3,
 }

@@ -14,6 +14,7 @@ pub mod scene;
 pub mod scenes;
 pub mod schedule;
 pub mod simulation;
+pub mod study;
 
 // The ECS systems live in the top-level `systems/` folder, one file per stage, so that the
 // pipeline is visible at a glance from the repository root; `#[path]` includes that folder
@@ -32,7 +33,7 @@ pub mod prelude {
         AngularVelocity, Board, Collider, Contact, ContactKind, Contacts, Force, Friction, Marble,
         Mass, Position, Quarantined, Radius, Restitution, Rotation, Velocity,
     };
-    pub use crate::config::{Integrator, StepConfig};
+    pub use crate::config::{Integrator, Preset, StepConfig};
     pub use crate::geometry::{BoardGeometry, PartShape};
     #[cfg(feature = "bevy")]
     pub use crate::plugin::MarblePhysicsPlugin;

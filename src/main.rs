@@ -28,11 +28,15 @@ enum Command {
     },
     /// Print the built-in default scene as RON.
     Scene,
-    /// The speed-versus-accuracy study.
+    /// The speed-versus-accuracy study: every integrator × dt × substeps × CCD on the
+    /// reference scenes; a table on stdout, the table and one plot per scene in DIR.
     Tradeoff {
-        /// Folder for the table and plots.
-        #[arg(long)]
+        /// Folder for the table and plots (default: marble-out/tradeoff).
+        #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
+        /// A small grid and shorter scenes (seconds instead of a minute or two).
+        #[arg(long)]
+        quick: bool,
     },
 }
 
@@ -101,9 +105,7 @@ fn main() -> ExitCode {
             println!("{}", scenes::default_scene().to_ron_string());
             Ok(())
         }
-        Some(Command::Tradeoff { .. }) => Err(other_error(
-            "the tradeoff study is not implemented in this version".into(),
-        )),
+        Some(Command::Tradeoff { out, quick }) => tradeoff(out, quick),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -114,8 +116,51 @@ fn main() -> ExitCode {
     }
 }
 
+fn tradeoff(out: Option<PathBuf>, quick: bool) -> Result<(), Failure> {
+    use bevy_marble::study::{self, Length, Reference};
+    let dir = out.unwrap_or_else(|| PathBuf::from("marble-out/tradeoff"));
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| other_error(format!("{}: cannot create: {e}", dir.display())))?;
+    let (settings, length) = if quick {
+        (study::quick_grid(), Length::Quick)
+    } else {
+        (study::full_grid(), Length::Full)
+    };
+    let bar = indicatif::ProgressBar::new(settings.len() as u64);
+    let started = Instant::now();
+    let rows = study::run(&settings, length, |done| bar.set_position(done as u64));
+    bar.finish_and_clear();
+    let report = format!(
+        "## Every setting\n\n{}\n## Presets\n\n{}\n## Compensated summation\n\n{}\n{}",
+        study::markdown(&rows),
+        study::presets_markdown(length),
+        study::compensation_markdown(length),
+        study::front_markdown(&rows),
+    );
+    print!("{report}");
+    let io = |p: &Path, e: std::io::Error| other_error(format!("{}: {e}", p.display()));
+    let md = dir.join("tradeoff.md");
+    std::fs::write(&md, &report).map_err(|e| io(&md, e))?;
+    for reference in Reference::ALL {
+        let svg = dir.join(format!("{}.svg", reference.name()));
+        bevy_marble::output::write_tradeoff_svg(&rows, reference, &svg).map_err(|e| io(&svg, e))?;
+    }
+    eprintln!(
+        "{} settings in {:.1} s; table and plots in {}",
+        rows.len(),
+        started.elapsed().as_secs_f64(),
+        dir.display()
+    );
+    Ok(())
+}
+
 fn load(path: &Path) -> Result<Scene, Failure> {
-    Scene::from_path(path).map_err(|e| input_error(format!("{}: {e}", path.display())))
+    let scene =
+        Scene::from_path(path).map_err(|e| input_error(format!("{}: {e}", path.display())))?;
+    for w in scene.warnings() {
+        eprintln!("warning: {}: {w}", path.display());
+    }
+    Ok(scene)
 }
 
 fn run_file(args: &RunArgs) -> Result<(), Failure> {

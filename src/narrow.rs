@@ -217,11 +217,11 @@ impl TouchList {
 }
 
 /// Touching tolerance for a marble of radius `r` near `x`: the configured fraction of the
-/// radius plus a few f32 ulps of the coordinates (so that far from the origin, where f32
+/// radius plus two f32 ulps of the coordinates (so that far from the origin, where f32
 /// cannot resolve the fraction, contact is still recognised).
 #[inline]
 pub fn touch_tolerance(relative: f32, r: f32, x: Vec3) -> f32 {
-    relative * r + 4.0 * f32::EPSILON * x.abs().max_element()
+    relative * r + 2.0 * f32::EPSILON * x.abs().max_element()
 }
 
 /// World-frame bounds of everything within `reach` of `x`.

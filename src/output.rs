@@ -144,3 +144,99 @@ impl HeightTrace {
         f.commit()
     }
 }
+
+/// Writes the error-versus-cost plot of one reference scene of the study (log–log, one
+/// colour per integrator, filled marks for CCD on, the Pareto front joined by a line).
+/// Errors of exactly 0 are drawn at the bottom of the axis.
+pub fn write_tradeoff_svg(
+    rows: &[crate::study::Row],
+    reference: crate::study::Reference,
+    path: &Path,
+) -> io::Result<()> {
+    use crate::config::Integrator;
+    use crate::study::pareto_front;
+    use plotters::prelude::*;
+
+    let floor = 1e-7f64;
+    let point = |r: &crate::study::Row| (r.us_per_second(), (r.error(reference) as f64).max(floor));
+    let (mut x0, mut x1, mut y1) = (f64::INFINITY, 0.0f64, floor * 10.0);
+    for r in rows {
+        let (x, y) = point(r);
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y1 = y1.max(y);
+    }
+    if !x0.is_finite() || x1 <= x0 {
+        (x0, x1) = (1.0, 10.0);
+    }
+    let colour = |i: Integrator| match i {
+        Integrator::SemiImplicitEuler => BLUE,
+        Integrator::VelocityVerlet => RED,
+        Integrator::Rk4 => GREEN,
+        Integrator::ExplicitEuler => MAGENTA,
+    };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 600)).into_drawing_area();
+        let draw = || -> Result<(), Box<dyn std::error::Error + '_>> {
+            root.fill(&WHITE)?;
+            let mut chart = ChartBuilder::on(&root)
+                .caption(
+                    format!("{}: {}", reference.name(), reference.description()),
+                    ("sans-serif", 16),
+                )
+                .margin(12)
+                .x_label_area_size(45)
+                .y_label_area_size(70)
+                .build_cartesian_2d(
+                    (x0 * 0.8..x1 * 1.25).log_scale(),
+                    (floor * 0.5..y1 * 2.0).log_scale(),
+                )?;
+            chart
+                .configure_mesh()
+                .x_desc("cost: µs per marble per simulated second")
+                .y_desc("error")
+                .x_label_formatter(&|x| format!("{x:.0}"))
+                .y_label_formatter(&|y| format!("{y:.0e}"))
+                .draw()?;
+            for integrator in Integrator::ALL {
+                let c = colour(integrator);
+                chart
+                    .draw_series(
+                        rows.iter()
+                            .filter(|r| r.setting.integrator == integrator)
+                            .map(|r| {
+                                let style = if r.setting.ccd {
+                                    c.filled()
+                                } else {
+                                    c.stroke_width(1)
+                                };
+                                Circle::new(point(r), 4, style)
+                            }),
+                    )?
+                    .label(format!("{integrator:?}"))
+                    .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
+            }
+            let front: Vec<(f64, f64)> = pareto_front(rows, reference)
+                .into_iter()
+                .map(|i| point(&rows[i]))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(front, BLACK.stroke_width(2)))?
+                .label("Pareto front (filled: CCD on)")
+                .legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], BLACK));
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::LowerLeft)
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()?;
+            root.present()?;
+            Ok(())
+        };
+        draw().map_err(|e| io::Error::other(e.to_string()))?;
+    }
+    let mut f = AtomicFile::create(path)?;
+    f.writer().write_all(svg.as_bytes())?;
+    f.commit()
+}

@@ -93,8 +93,8 @@ pub enum Found<'a> {
     Overlap,
 }
 
-/// Runs the event loop of the module docs for one marble; returns its end state and
-/// records its contacts.
+/// Runs the event loop of the module docs for one marble; returns its displacement from
+/// `m.x0` over the substep and its end velocity, and records its contacts.
 pub fn resolve(
     boards: &[BoardSnapshot],
     p: &SubstepParams,
@@ -107,7 +107,10 @@ pub fn resolve(
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut touches = TouchList::default();
     let mut t = 0.0f32;
-    let mut x = m.x0;
+    // Displacement from `x0`: small numbers, added to the position once at the end with
+    // compensated summation, so that f32 keeps sub-ulp motion far from the origin and at
+    // tiny steps.
+    let mut d = Vec3::ZERO;
     // The integrator's reported velocity until converted: collisions and contacts at the
     // start are judged on the velocity before this step's forces.
     let mut v = m.v0;
@@ -120,18 +123,28 @@ pub fn resolve(
         Found::Touching(start) => {
             touches = *start;
             respond(&touches, &mut v, p.threshold, boards, 0.0, contacts);
-            let a = settle(&touches, &mut x, &mut v, m.a, sep);
+            let a = settle(&touches, &mut d, &mut v, m.a, sep);
             v += offset(a);
             a
         }
         Found::Impact(tau) => {
             v += offset(m.a);
-            (x, v) = free_path(x, v, m.a, tau);
+            let (dd, vv) = free_step(v, m.a, tau);
+            (d, v) = (d + dd, vv);
             t = tau;
             impacts = 1;
-            gather(boards, t, x, m.r, tol, m.restitution, -v, &mut touches);
+            gather(
+                boards,
+                t,
+                m.x0 + d,
+                m.r,
+                tol,
+                m.restitution,
+                -v,
+                &mut touches,
+            );
             respond(&touches, &mut v, p.threshold, boards, t, contacts);
-            settle(&touches, &mut x, &mut v, m.a, sep)
+            settle(&touches, &mut d, &mut v, m.a, sep)
         }
         Found::Overlap => {
             v += offset(m.a);
@@ -146,23 +159,48 @@ pub fn resolve(
                 // Wedged: stay at the last safe position for the rest of the substep.
                 break;
             }
-            let path = Path { t0: t, x, v, a };
+            let path = Path {
+                t0: t,
+                x: m.x0 + d,
+                v,
+                a,
+            };
             if let Some((tau, _)) = earliest_impact(boards, &path, span, m.r, tol) {
-                (x, v) = path.state(tau);
+                let (dd, vv) = free_step(v, a, tau);
+                (d, v) = (d + dd, vv);
                 t += tau;
                 impacts += 1;
-                gather(boards, t, x, m.r, tol, m.restitution, -v, &mut touches);
+                gather(
+                    boards,
+                    t,
+                    m.x0 + d,
+                    m.r,
+                    tol,
+                    m.restitution,
+                    -v,
+                    &mut touches,
+                );
                 respond(&touches, &mut v, p.threshold, boards, t, contacts);
-                a = settle(&touches, &mut x, &mut v, m.a, sep);
+                a = settle(&touches, &mut d, &mut v, m.a, sep);
                 continue;
             }
         }
-        (x, v) = free_path(x, v, a, span);
+        let (dd, vv) = free_step(v, a, span);
+        (d, v) = (d + dd, vv);
         break;
     }
 
     // End of substep: resolve what still overlaps, or touches while approaching.
-    gather(boards, p.h, x, m.r, tol, m.restitution, -v, &mut touches);
+    gather(
+        boards,
+        p.h,
+        m.x0 + d,
+        m.r,
+        tol,
+        m.restitution,
+        -v,
+        &mut touches,
+    );
     for tc in touches.as_slice() {
         let u = (v - tc.board_velocity).dot(tc.normal);
         if tc.gap >= 0.0 && u >= 0.0 {
@@ -186,20 +224,21 @@ pub fn resolve(
         }
         if tc.gap < 0.0 {
             // Onto the surface; no velocity is added for it.
-            x -= tc.gap * tc.normal;
+            d -= tc.gap * tc.normal;
         }
         record(contacts, boards, tc, kind, if p.ccd { u } else { u0 }, p.h);
     }
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
-    let a_end = settle(&touches, &mut x, &mut v, m.a, sep);
-    (x, v - offset(a_end))
+    let a_end = settle(&touches, &mut d, &mut v, m.a, sep);
+    (d, v - offset(a_end))
 }
 
-/// The exact path of constant acceleration: `(x + v τ + ½ a τ², v + a τ)`.
+/// Displacement and velocity after `tau` on the exact path of constant acceleration:
+/// `(v τ + ½ a τ², v + a τ)`.
 #[inline]
-fn free_path(x: Vec3, v: Vec3, a: Vec3, tau: f32) -> (Vec3, Vec3) {
-    (x + v * tau + a * (0.5 * tau * tau), v + a * tau)
+fn free_step(v: Vec3, a: Vec3, tau: f32) -> (Vec3, Vec3) {
+    (v * tau + a * (0.5 * tau * tau), v + a * tau)
 }
 
 /// Below this normal speed (m/s) a marble is not leaving the surface it touches.
@@ -265,13 +304,13 @@ fn respond(
 /// into the board. Returns that constrained acceleration. Without the first two, rounding
 /// would let a resting or sliding marble drift off its surface by ulps per step.
 #[inline]
-fn settle(touches: &TouchList, x: &mut Vec3, v: &mut Vec3, a: Vec3, sep: f32) -> Vec3 {
+fn settle(touches: &TouchList, d: &mut Vec3, v: &mut Vec3, a: Vec3, sep: f32) -> Vec3 {
     let mut a = a;
     for tc in touches.as_slice() {
         let u = (*v - tc.board_velocity).dot(tc.normal);
         if u <= sep {
             if tc.gap > 0.0 {
-                *x -= tc.gap * tc.normal;
+                *d -= tc.gap * tc.normal;
             }
             *v -= u * tc.normal;
         }

@@ -12,7 +12,7 @@ use parry3d::utils::Array2;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::config::{Integrator, StepConfig};
+use crate::config::{Integrator, Preset, StepConfig};
 use crate::geometry::{BoardGeometry, PartShape};
 
 /// Why a scene could not be loaded or used. Each is the user's input at fault.
@@ -59,6 +59,10 @@ pub struct Scene {
     pub substeps: u32,
     /// Time integrator.
     pub integrator: Integrator,
+    /// A named speed-versus-accuracy setting (`Fast`, `Balanced`, `Precise`): sets the
+    /// integrator, substeps and CCD, which the scene must then leave at their defaults.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub preset: Option<Preset>,
     /// Continuous collision.
     pub ccd: bool,
     /// Spin and friction at contacts (not yet supported).
@@ -83,6 +87,7 @@ impl Default for Scene {
             dt: c.dt,
             substeps: c.substeps,
             integrator: c.integrator,
+            preset: None,
             ccd: c.ccd,
             rolling: false,
             marble_collisions: false,
@@ -297,6 +302,25 @@ impl Scene {
             return invalid("substeps", ">= 1", self.substeps);
         }
         non_negative("restitution_threshold", self.restitution_threshold)?;
+        if let Some(preset) = self.preset {
+            let defaults = Scene::default();
+            let conflict = if self.integrator != defaults.integrator {
+                Some(("integrator", format!("{:?}", self.integrator)))
+            } else if self.substeps != defaults.substeps {
+                Some(("substeps", self.substeps.to_string()))
+            } else if self.ccd != defaults.ccd {
+                Some(("ccd", self.ccd.to_string()))
+            } else {
+                None
+            };
+            if let Some((field, value)) = conflict {
+                return invalid(
+                    field,
+                    &format!("left out when preset {preset:?} sets it"),
+                    value,
+                );
+            }
+        }
         non_negative("duration", self.duration)?;
         if self.rolling {
             return Err(SceneError::Unsupported {
@@ -344,9 +368,42 @@ impl Scene {
         Ok(())
     }
 
-    /// The step settings of this scene.
+    /// Settings that are valid but measured to misbehave (see `marble tradeoff`), each as
+    /// one line of advice. The CLI prints them as warnings.
+    pub fn warnings(&self) -> Vec<String> {
+        let config = self.step_config();
+        let mut out = Vec::new();
+        if !config.ccd {
+            let r = self
+                .marbles
+                .iter()
+                .map(|m| m.radius)
+                .fold(f32::INFINITY, f32::min);
+            let speed = if r.is_finite() {
+                format!(" ({} m/s for the smallest marble)", r / self.dt)
+            } else {
+                String::new()
+            };
+            out.push(format!(
+                "ccd is off: marbles faster than radius/dt{speed} can pass through thin \
+                 boards, and bounces lose height (15% by the fifth bounce at 1/60 s); \
+                 `ccd: true` costs about a third more"
+            ));
+            if config.integrator == Integrator::ExplicitEuler {
+                out.push(
+                    "ExplicitEuler without ccd gains energy at every bounce (an elastic \
+                     bounce at 1/60 s ends a minute 2.6 times as high); use VelocityVerlet, \
+                     which costs the same"
+                        .into(),
+                );
+            }
+        }
+        out
+    }
+
+    /// The step settings of this scene (its preset applied, if any).
     pub fn step_config(&self) -> StepConfig {
-        StepConfig {
+        let mut config = StepConfig {
             gravity: Vec3::from_array(self.gravity),
             dt: self.dt,
             substeps: self.substeps,
@@ -354,7 +411,11 @@ impl Scene {
             ccd: self.ccd,
             restitution_threshold: self.restitution_threshold,
             ..StepConfig::default()
+        };
+        if let Some(preset) = self.preset {
+            preset.apply(&mut config);
         }
+        config
     }
 
     /// Number of steps `marble run` takes without `--steps`: `duration / dt`, rounded.

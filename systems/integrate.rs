@@ -2,29 +2,41 @@
 
 use bevy_ecs::prelude::*;
 
-use crate::components::{Acceleration, Marble, Position, Quarantined, StepStart, Velocity};
+use crate::components::{
+    Acceleration, Marble, Position, PositionCarry, Quarantined, StepStart, Velocity,
+    compensated_add,
+};
 use crate::config::StepConfig;
 use crate::narrow::BoardCache;
 
-/// Advances every marble by one substep of free motion with the configured integrator,
-/// remembering where it started ([`StepStart`]) for detection and response.
+/// Advances every marble by one substep of free motion with the configured integrator
+/// (position by compensated summation, see [`PositionCarry`]), remembering where it
+/// started ([`StepStart`]) for detection and response.
 pub fn integrate(
     config: Res<StepConfig>,
     cache: Res<BoardCache>,
     mut marbles: Query<
-        (&mut Position, &mut Velocity, &Acceleration, &mut StepStart),
+        (
+            &mut Position,
+            &mut PositionCarry,
+            &mut Velocity,
+            &Acceleration,
+            &mut StepStart,
+        ),
         (With<Marble>, Without<Quarantined>),
     >,
 ) {
     let h = cache.h;
     let integrator = config.integrator;
-    for (mut position, mut velocity, acceleration, mut start) in &mut marbles {
+    let compensated = config.compensated;
+    for (mut position, mut carry, mut velocity, acceleration, mut start) in &mut marbles {
         *start = StepStart {
             position: position.0,
+            carry: carry.0,
             velocity: velocity.0,
         };
-        let (x, v) = integrator.advance(position.0, velocity.0, acceleration.0, h);
-        position.0 = x;
-        velocity.0 = v;
+        let (dx, dv) = integrator.delta(velocity.0, acceleration.0, h);
+        (position.0, carry.0) = compensated_add(compensated, position.0, carry.0, dx);
+        velocity.0 += dv;
     }
 }

@@ -3,8 +3,8 @@
 use bevy_ecs::prelude::*;
 
 use crate::components::{
-    Acceleration, Contacts, Marble, Pending, Position, Quarantined, Radius, Restitution, StepStart,
-    Velocity,
+    Acceleration, Contacts, Marble, Pending, Position, PositionCarry, Quarantined, Radius,
+    Restitution, StepStart, Velocity, compensated_add,
 };
 use crate::config::StepConfig;
 use crate::narrow::{BoardCache, TouchList, gather, touch_tolerance};
@@ -20,6 +20,7 @@ pub fn respond(
     mut marbles: Query<
         (
             &mut Position,
+            &mut PositionCarry,
             &mut Velocity,
             &StepStart,
             &Acceleration,
@@ -40,8 +41,16 @@ pub fn respond(
         max_impacts: config.max_impacts,
     };
     let mut touches = TouchList::default();
-    for (mut position, mut velocity, start, acceleration, radius, restitution, mut contacts) in
-        &mut marbles
+    for (
+        mut position,
+        mut carry,
+        mut velocity,
+        start,
+        acceleration,
+        radius,
+        restitution,
+        mut contacts,
+    ) in &mut marbles
     {
         if contacts.pending == Pending::None {
             continue;
@@ -80,8 +89,8 @@ pub fn respond(
             Pending::Impact(tau) => Found::Impact(tau),
             Pending::Overlap | Pending::None => Found::Overlap,
         };
-        let (x, v) = resolve(boards, &params, &marble, found, &mut contacts);
-        position.0 = x;
+        let (d, v) = resolve(boards, &params, &marble, found, &mut contacts);
+        (position.0, carry.0) = compensated_add(config.compensated, start.position, start.carry, d);
         velocity.0 = v;
     }
 }

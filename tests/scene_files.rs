@@ -348,3 +348,55 @@ fn cli_check_scene_and_default_run() {
     assert!(csv.starts_with("step,time,marble,"));
     assert!(dir.join("marble-out/default.svg").exists());
 }
+
+/// A preset in a scene file sets the integrator, substeps and CCD of the step.
+#[test]
+fn presets_load_from_scene_files() {
+    for (text, preset) in [
+        ("(preset: Fast)", Preset::Fast),
+        ("(preset: Balanced)", Preset::Balanced),
+        ("(preset: Precise)", Preset::Precise),
+    ] {
+        let scene = Scene::from_ron_str(text).unwrap();
+        assert_eq!(scene.step_config(), StepConfig::with_preset(preset));
+    }
+    let json = Scene::from_json_str(r#"{"preset": "Precise", "dt": 0.01}"#).unwrap();
+    let c = json.step_config();
+    assert_eq!(
+        (c.integrator, c.substeps, c.ccd, c.dt),
+        (Integrator::VelocityVerlet, 4, true, 0.01)
+    );
+}
+
+/// `marble tradeoff --quick` runs the whole study on a small grid: the table on stdout,
+/// the report and one plot per reference scene in DIR, and the measured facts the README
+/// relies on hold (CCD holds the thin wall, compensation keeps the 100 m fall).
+#[test]
+fn cli_tradeoff_quick() {
+    let dir = temp_dir("tradeoff");
+    let o = marble(&["tradeoff", "--quick", "--out", "study"], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        out.contains("| integrator | dt | substeps | CCD |"),
+        "{out}"
+    );
+    assert!(out.contains("## Presets") && out.contains("Pareto front: bounce"));
+    let grid_rows = out.lines().filter(|l| l.matches('|').count() == 13);
+    for line in grid_rows.filter(|l| l.contains("| on |") && l.starts_with("| Velocity")) {
+        assert!(line.ends_with("holds |"), "{line}");
+    }
+    let report = std::fs::read_to_string(dir.join("study/tradeoff.md")).unwrap();
+    assert_eq!(report, out);
+    for name in [
+        "bounce",
+        "elastic",
+        "incline",
+        "moving_board",
+        "resting",
+        "thin_wall",
+    ] {
+        let svg = std::fs::read_to_string(dir.join(format!("study/{name}.svg"))).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("Pareto"), "{name}");
+    }
+}
