@@ -172,12 +172,12 @@ fn far_from_the_origin() {
             .map(|(x, v)| (x - offset, v))
             .collect();
         let a = apexes(&traj, R);
-        for k in 0..3 {
+        assert!(a.len() >= 3, "offset {offset}: {} bounces", a.len());
+        for (k, h) in a.iter().enumerate().take(3) {
             let exact = 0.8f32.powi(2 * (k as i32 + 1));
             assert!(
-                ((a[k] - exact) / exact).abs() <= 0.01,
-                "offset {offset}: apex {k} = {}, exact {exact}",
-                a[k]
+                ((h - exact) / exact).abs() <= 0.01,
+                "offset {offset}: apex {k} = {h}, exact {exact}"
             );
         }
     }
