@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests.
-#![allow(dead_code)]
+// Each test binary uses a different part of this module: `expect` would fail in some.
+#![allow(dead_code, unused_imports)]
 
 use bevy_marble::prelude::*;
 use bevy_marble::scenes;
