@@ -275,8 +275,12 @@ pub(crate) enum Pending {
     /// Free motion stands.
     #[default]
     None,
-    /// Touches at the substep's start (recorded in the list).
-    Touching,
+    /// Touches at the substep's start (recorded in the list); `complete` when no other
+    /// piece was within reach (see `TouchList::is_complete`).
+    Touching {
+        /// Every piece within reach was recorded.
+        complete: bool,
+    },
     /// First impact along the free path at this time, s.
     Impact(f32),
     /// Overlap at the end of the free path (continuous collision off).

@@ -126,6 +126,8 @@ pub const MAX_TOUCHES: usize = 8;
 pub struct TouchList {
     items: [Touch; MAX_TOUCHES],
     len: usize,
+    /// Candidates within reach that were left out (implied by a nearer touch, or no room).
+    dropped: usize,
 }
 
 impl Default for TouchList {
@@ -140,6 +142,7 @@ impl Default for TouchList {
                 restitution: 0.0,
             }; MAX_TOUCHES],
             len: 0,
+            dropped: 0,
         }
     }
 }
@@ -161,6 +164,26 @@ impl TouchList {
     #[inline]
     pub fn clear(&mut self) {
         self.len = 0;
+        self.dropped = 0;
+    }
+
+    /// True when every piece within reach is in the list (none was implied by another or
+    /// left out for room).
+    #[inline]
+    pub fn is_complete(&self) -> bool {
+        self.dropped == 0
+    }
+
+    /// Marks the list complete or not (for a list rebuilt from recorded contacts).
+    #[inline]
+    pub fn set_complete(&mut self, complete: bool) {
+        self.dropped = usize::from(!complete);
+    }
+
+    /// True when `piece` is in the list.
+    #[inline]
+    pub fn contains(&self, piece: PieceId) -> bool {
+        self.as_slice().iter().any(|t| t.piece == piece)
     }
 
     /// Appends a touch that detection recorded as a [`Contact`](crate::components::Contact)
@@ -193,10 +216,12 @@ impl TouchList {
         let implied_by = |a: &Touch, b: &Touch| (b.point - a.point).dot(a.normal) <= plane_tol;
         let pos = self.as_slice().partition_point(|a| a.gap <= t.gap);
         if self.as_slice()[..pos].iter().any(|a| implied_by(a, &t)) {
+            self.dropped += 1;
             return;
         }
         // Insert, then drop the farther touches the newcomer implies.
         if self.len == MAX_TOUCHES {
+            self.dropped += 1;
             if pos == MAX_TOUCHES {
                 return;
             }
@@ -212,6 +237,7 @@ impl TouchList {
                 w += 1;
             }
         }
+        self.dropped += self.len - w;
         self.len = w;
     }
 }
@@ -318,12 +344,15 @@ impl Path {
 
 /// The earliest impact along `path` within `span` seconds with a piece the marble does not
 /// touch at the path's start: `(tau, piece)`, `tau` measured from `path.t0`.
+///
+/// Pieces in `touching` are skipped without a distance query (the marble touches them).
 pub fn earliest_impact(
     boards: &[BoardSnapshot],
     path: &Path,
     span: f32,
     r: f32,
     tol: f32,
+    touching: &TouchList,
 ) -> Option<(f32, PieceId)> {
     let end = path.position(span);
     // Bounds of the path: the chord plus the parabola's bulge (⅛ |a| span², rounded up).
@@ -368,6 +397,9 @@ pub fn earliest_impact(
         }
         let limit = best.map_or(span, |(t, _)| t);
         b.geometry.for_each_piece(&query, |part, sub, piece| {
+            if touching.contains(PieceId::new(bi, part, sub)) {
+                return;
+            }
             let limit = best.map_or(limit, |(t, _)| t.min(limit));
             let gap_at = |tau: f32| {
                 let (c, q) = if moving {

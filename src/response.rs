@@ -116,6 +116,8 @@ pub fn resolve(
     let mut v = m.v0;
     let mut impacts = 0;
     contacts.clear();
+    // Whether the end-of-substep check can be skipped: see below.
+    let mut settled_start = matches!(found, Found::Touching(_));
 
     // From here on `v` is the path velocity (see `Integrator`), and `a` the acceleration
     // left after the constraints of the touches the marble rests on.
@@ -165,10 +167,11 @@ pub fn resolve(
                 v,
                 a,
             };
-            if let Some((tau, _)) = earliest_impact(boards, &path, span, m.r, tol) {
+            if let Some((tau, _)) = earliest_impact(boards, &path, span, m.r, tol, &touches) {
                 let (dd, vv) = free_step(v, a, tau);
                 (d, v) = (d + dd, vv);
                 t += tau;
+                settled_start = false;
                 impacts += 1;
                 gather(
                     boards,
@@ -187,7 +190,28 @@ pub fn resolve(
         }
         let (dd, vv) = free_step(v, a, span);
         (d, v) = (d + dd, vv);
+        t = p.h;
         break;
+    }
+
+    // The end-of-substep check finds nothing when the marble spent the whole substep on
+    // the touches it started with, all of them complete (no other piece within reach),
+    // not overlapping, sustained (not leaving: normal speed and acceleration into them
+    // removed) and on static boards: each piece is convex, so it lies behind its tangent plane, and a path
+    // that never approaches that plane never enters it; every other piece was watched by
+    // continuous collision. That is the common case of a marble resting or sliding.
+    if p.ccd
+        && settled_start
+        && t >= p.h
+        && touches.is_complete()
+        && touches.as_slice().iter().all(|tc| {
+            !boards[tc.piece.board()].is_moving()
+                && tc.gap >= 0.0
+                && (v - tc.board_velocity).dot(tc.normal) <= sep
+                && a.dot(tc.normal) >= 0.0
+        })
+    {
+        return (d, v - offset(a));
     }
 
     // End of substep: resolve what still overlaps, or touches while approaching.

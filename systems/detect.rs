@@ -68,7 +68,9 @@ pub fn detect_contacts(
                     piece: tc.piece,
                 });
             }
-            contacts.pending = Pending::Touching;
+            contacts.pending = Pending::Touching {
+                complete: touches.is_complete(),
+            };
         } else if config.ccd {
             let path = Path {
                 t0: 0.0,
@@ -76,7 +78,7 @@ pub fn detect_contacts(
                 v: start.velocity + config.integrator.velocity_offset(acceleration.0, h),
                 a: acceleration.0,
             };
-            if let Some((tau, _)) = earliest_impact(boards, &path, h, r, tol) {
+            if let Some((tau, _)) = earliest_impact(boards, &path, h, r, tol, &touches) {
                 contacts.pending = Pending::Impact(tau);
             }
         } else {

@@ -63,7 +63,7 @@ pub fn respond(
             restitution: restitution.0,
         };
         let found = match contacts.pending {
-            Pending::Touching => {
+            Pending::Touching { complete } => {
                 // Detection recorded these touches; gather again only if it ran out of
                 // room to record them all.
                 if contacts.len() < crate::components::MAX_CONTACTS {
@@ -71,6 +71,7 @@ pub fn respond(
                     for c in contacts.iter() {
                         touches.push_recorded(c, boards, marble.restitution);
                     }
+                    touches.set_complete(complete);
                 } else {
                     let tol = touch_tolerance(params.tolerance, marble.r, marble.x0);
                     gather(
