@@ -349,23 +349,30 @@ fn cli_check_scene_and_default_run() {
     assert!(dir.join("marble-out/default.svg").exists());
 }
 
-/// A preset in a scene file sets the integrator, substeps and CCD of the step.
+/// A preset in a scene file sets the integrator, CCD and the substeps its dt needs.
 #[test]
 fn presets_load_from_scene_files() {
-    for (text, preset) in [
-        ("(preset: Fast)", Preset::Fast),
-        ("(preset: Balanced)", Preset::Balanced),
-        ("(preset: Precise)", Preset::Precise),
+    // (preset, dt, substeps): substeps reach the preset's longest substep.
+    for (preset, dt, substeps) in [
+        ("Fast", "0.016666668", 1),
+        ("Balanced", "0.016666668", 1),
+        ("Precise", "0.016666668", 4),
+        ("Fast", "0.1", 3),
+        ("Balanced", "0.033333335", 2),
+        ("Precise", "0.004166667", 1),
     ] {
-        let scene = Scene::from_ron_str(text).unwrap();
-        assert_eq!(scene.step_config(), StepConfig::with_preset(preset));
+        let scene = Scene::from_ron_str(&format!("(preset: {preset}, dt: {dt})")).unwrap();
+        let c = scene.step_config();
+        assert_eq!(c, StepConfig::with_preset(scene.preset.unwrap(), scene.dt));
+        assert_eq!(
+            (c.integrator, c.ccd, c.substeps),
+            (Integrator::VelocityVerlet, true, substeps),
+            "{preset} at {dt}"
+        );
     }
     let json = Scene::from_json_str(r#"{"preset": "Precise", "dt": 0.01}"#).unwrap();
     let c = json.step_config();
-    assert_eq!(
-        (c.integrator, c.substeps, c.ccd, c.dt),
-        (Integrator::VelocityVerlet, 4, true, 0.01)
-    );
+    assert_eq!((c.substeps, c.contact_tolerance), (3, 1e-5));
 }
 
 /// `marble tradeoff --quick` runs the whole study on a small grid: the table on stdout,
