@@ -55,8 +55,10 @@ vec3_newtype!(
     Force
 );
 vec3_newtype!(
-    /// Angular velocity of a board, rad/s, world frame, about its [`Position`]. A board's
-    /// surface point `p` moves at `velocity + angular_velocity × (p − position)`.
+    /// Angular velocity, rad/s, world frame. A board turns about its [`Position`]: its
+    /// surface point `p` moves at `velocity + angular_velocity × (p − position)`. A marble
+    /// carries one only when rolling is modelled (with a [`Rotation`] for its orientation):
+    /// it is the marble's spin, with the solid-sphere inertia `(2/5) m r²`.
     AngularVelocity
 );
 vec3_newtype!(
@@ -65,7 +67,7 @@ vec3_newtype!(
     Acceleration
 );
 
-/// Orientation of a board (unit quaternion, local → world).
+/// Orientation (unit quaternion, local → world) of a board, or of a marble that rolls.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
 pub struct Rotation(pub Quat);
 
@@ -200,6 +202,19 @@ impl Default for Restitution {
         Restitution(0.5)
     }
 }
+
+/// Rolling resistance coefficient ≥ 0 (dimensionless), used when rolling is modelled: a
+/// torque `c·N·r` against the rolling spin, so a rolling marble decelerates at
+/// `(5/7)·c·g` on level ground. A pair uses the average of its two parties' values.
+/// Default 0 (optional: absent means 0).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct RollingResistance(pub f32);
+
+/// Spin damping coefficient ≥ 0 (dimensionless), used when rolling is modelled: a torque
+/// `k·N·r` against the spin about the contact normal. A pair uses the average of its two
+/// parties' values. Default 0 (optional: absent means 0).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct SpinDamping(pub f32);
 
 /// Coulomb friction coefficient ≥ 0, used when rolling is modelled. A pair uses the
 /// average of its two parties' values. Default 0.5.

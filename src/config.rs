@@ -205,6 +205,12 @@ pub struct StepConfig {
     /// 8 mm marble); sensible 1e-5–1e-2. A marble closer to a surface than this is in
     /// contact; continuous collision stops this far from the surface.
     pub contact_tolerance: f32,
+    /// Model spin and friction at contacts (marbles roll). Default `false`: the seed's
+    /// smooth surfaces, and no rolling system runs. Only marbles that carry an
+    /// [`AngularVelocity`](crate::components::AngularVelocity) spin (scene files give every
+    /// marble one when `rolling: true`); a [`Rotation`](crate::components::Rotation) on them
+    /// is turned by it.
+    pub rolling: bool,
     /// Add each substep's motion to positions with compensated (Kahan) summation, keeping
     /// the rounding error in [`PositionCarry`](crate::components::PositionCarry). Default
     /// `true`. Off, f32 rounding loses motion that is small against the coordinates: at
@@ -226,6 +232,7 @@ impl Default for StepConfig {
             ccd: true,
             restitution_threshold: 0.05,
             contact_tolerance: 1e-4,
+            rolling: false,
             compensated: true,
             max_impacts: 8,
         }

@@ -258,6 +258,12 @@ impl BoardGeometry {
 }
 
 impl Piece {
+    /// Whether the piece is convex.
+    #[inline]
+    pub fn is_convex(&self) -> bool {
+        true
+    }
+
     /// Signed distance, closest point and normal of the piece-frame point `q`.
     #[inline]
     pub fn proximity(&self, q: Vec3, hint: Vec3) -> Proximity {

@@ -56,6 +56,10 @@ pub struct BoardSnapshot {
     pub restitution: f32,
     /// Friction.
     pub friction: f32,
+    /// Rolling resistance coefficient (used when rolling is on).
+    pub rolling_resistance: f32,
+    /// Spin damping coefficient (used when rolling is on).
+    pub spin_damping: f32,
     /// World bounds swept over the substep; `None` when unbounded (planes).
     pub swept_aabb: Option<Aabb>,
     /// Farthest distance of the board's bounds from its origin (for rotation bounds).
@@ -114,8 +118,36 @@ pub struct Touch {
     pub gap: f32,
     /// Board material velocity at `point`.
     pub board_velocity: Vec3,
-    /// Combined restitution of the pair.
+    /// Combined material of the pair (averages of the two parties' coefficients).
+    pub material: Material,
+    /// Whether the piece is convex (it then lies behind its tangent plane at the contact).
+    pub convex: bool,
+}
+
+/// Contact coefficients of a marble or of a marble–board pair.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Material {
+    /// Restitution, [0, 1].
     pub restitution: f32,
+    /// Coulomb friction, ≥ 0.
+    pub friction: f32,
+    /// Rolling resistance, ≥ 0.
+    pub rolling_resistance: f32,
+    /// Spin damping about the normal, ≥ 0.
+    pub spin_damping: f32,
+}
+
+impl Material {
+    /// The pair's material: the average of each coefficient (the contract's default rule).
+    #[inline]
+    pub fn combine(&self, b: &BoardSnapshot) -> Material {
+        Material {
+            restitution: 0.5 * (self.restitution + b.restitution),
+            friction: 0.5 * (self.friction + b.friction),
+            rolling_resistance: 0.5 * (self.rolling_resistance + b.rolling_resistance),
+            spin_damping: 0.5 * (self.spin_damping + b.spin_damping),
+        }
+    }
 }
 
 /// Most touches considered at once by one marble.
@@ -139,7 +171,8 @@ impl Default for TouchList {
                 normal: Vec3::Y,
                 gap: 0.0,
                 board_velocity: Vec3::ZERO,
-                restitution: 0.0,
+                material: Material::default(),
+                convex: true,
             }; MAX_TOUCHES],
             len: 0,
             dropped: 0,
@@ -192,7 +225,7 @@ impl TouchList {
         &mut self,
         c: &crate::components::Contact,
         boards: &[BoardSnapshot],
-        marble_restitution: f32,
+        marble: &Material,
     ) {
         if self.len == MAX_TOUCHES {
             return;
@@ -204,7 +237,8 @@ impl TouchList {
             normal: c.normal,
             gap: -c.depth,
             board_velocity: b.point_velocity(0.0, c.point),
-            restitution: 0.5 * (marble_restitution + b.restitution),
+            material: marble.combine(b),
+            convex: b.geometry.piece(c.piece.part(), c.piece.sub()).is_convex(),
         };
         self.len += 1;
     }
@@ -262,8 +296,8 @@ fn overlaps(a: &Aabb, b: &Aabb) -> bool {
 }
 
 /// Collects into `out` the independent pieces within `tol` of a marble of radius `r`
-/// centred at `x`, at time `t` of the substep. `marble_restitution` is combined with each
-/// board's; `hint` orients normals in degenerate cases (the marble's velocity reversed).
+/// centred at `x`, at time `t` of the substep. The marble's `material` is combined with
+/// each board's; `hint` orients normals in degenerate cases (the marble's velocity reversed).
 #[expect(
     clippy::too_many_arguments,
     reason = "a hot kernel taking plain values"
@@ -274,7 +308,7 @@ pub fn gather(
     x: Vec3,
     r: f32,
     tol: f32,
-    marble_restitution: f32,
+    material: &Material,
     hint: Vec3,
     out: &mut TouchList,
 ) {
@@ -305,7 +339,8 @@ pub fn gather(
                         normal: q * p.normal,
                         gap,
                         board_velocity: b.point_velocity(t, point),
-                        restitution: 0.5 * (marble_restitution + b.restitution),
+                        material: material.combine(b),
+                        convex: piece.is_convex(),
                     },
                     tol,
                 );

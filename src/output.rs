@@ -59,11 +59,11 @@ pub fn write_csv_rows(w: &mut impl Write, sim: &Simulation, step: u64, dt: f32) 
     let time = (step as f64 * dt as f64) as f32;
     for i in 0..sim.marbles().len() {
         let (x, v) = sim.marble_state(i);
-        // Spin is not modelled yet (rolling is off): ω = 0.
+        let s = sim.marble_spin(i);
         writeln!(
             w,
-            "{step},{time},{i},{},{},{},{},{},{},0,0,0",
-            x.x, x.y, x.z, v.x, v.y, v.z
+            "{step},{time},{i},{},{},{},{},{},{},{},{},{}",
+            x.x, x.y, x.z, v.x, v.y, v.z, s.x, s.y, s.z
         )?;
     }
     Ok(())

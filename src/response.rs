@@ -23,12 +23,12 @@
 //! 3. **Constrained acceleration.** For every touch the marble is not leaving, the marble
 //!    is put on the surface (it is within the touching tolerance of it), its residual normal
 //!    speed relative to the board is removed, and so is the part of the acceleration that
-//!    pushes into the board. A resting marble therefore
-//!    stays exactly where it is (no sinking, no correction, no jitter), and a marble on a
-//!    smooth incline follows its surface exactly (`s = ½ g sinθ t²` with Verlet).
+//!    pushes into the board. A resting marble therefore stays exactly where it is (no
+//!    sinking, no correction, no jitter), and a marble on a smooth incline follows its
+//!    surface exactly (`s = ½ g sinθ t²` with Verlet).
 //! 4. **Continuous collision** (`ccd`): the earliest impact along the marble's path (the
-//!    exact parabola of its integrator's *path velocity*, see
-//!    [`Integrator`]) with a piece not touched yet ([`crate::narrow::earliest_impact`]); advance to it and go to 1.
+//!    exact parabola of its integrator's *path velocity*, see [`Integrator`]) with a piece
+//!    not touched yet ([`crate::narrow::earliest_impact`]); advance to it and go to 1.
 //!    Without `ccd`, or when no impact remains, integrate to `h`.
 //! 5. **End of substep.** Any penetration left (boards that turned into the marble, marbles
 //!    spawned inside a board, or every impact when `ccd` is off) is resolved by the same
@@ -37,6 +37,28 @@
 //!    added for it), and a collision found this late leaves with normal speed `−e·u0` —
 //!    equation (1) on the approach speed, not on the end speed, which carries the gravity of
 //!    the time spent inside the board.
+//!
+//! # Rolling (only for marbles that spin)
+//! With rolling on, marbles carry an angular velocity `ω` and the solid-sphere inertia
+//! `I = (2/5) m r²`. The contact point moves at `v_c = v + ω × (−r n) − v_b(p)`; its
+//! tangential part is the *slip*. Per unit mass, a tangential force `f` at the contact
+//! changes the slip at the rate `a_t + (7/2) f` (`f` itself, plus `(5/2) f` through the
+//! spin it drives: `α = (5 / 2r) (−n × f)`), so:
+//! - at an impact (step 2), the tangential impulse that stops the slip is `−(2/7) v_c,t`,
+//!   limited by Coulomb to `μ` × the normal impulse of that impact (an oblique impact puts
+//!   spin on the marble);
+//! - on a sustained touch (step 3), with normal force `N` (the normal acceleration the
+//!   touch removed): if the marble rolls (no slip), static friction
+//!   `f = −(2/7)(a_t + α_rr × (−r n))` keeps it rolling, unless that exceeds `μN`; if it
+//!   slips, kinetic friction `f = −μN ŝ`. Kinetic friction stops the slip at a time found
+//!   in closed form, which is an event of the loop like an impact, so rolling begins at its
+//!   exact moment (`2 v0 / (7 μ g)` for a marble launched without spin);
+//! - rolling resistance `c` is a torque `c N r` against the rolling spin (a rolling marble
+//!   then decelerates at `(5/7) c g`) and spin damping `k` a torque `k N r` against the spin
+//!   about the normal; both are opt-in (default 0).
+//!
+//! The forces are constant over each stretch between events, so the exact-parabola path
+//! and the spin `ω + α τ` stay exact there.
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever stops at its last safe position for the rest of the
@@ -48,7 +70,9 @@ use glam::Vec3;
 
 use crate::components::{Contact, ContactKind, Contacts};
 use crate::config::Integrator;
-use crate::narrow::{BoardSnapshot, MAX_TOUCHES, Path, TouchList, earliest_impact, gather};
+use crate::narrow::{
+    BoardSnapshot, MAX_TOUCHES, Material, Path, Touch, TouchList, earliest_impact, gather,
+};
 
 /// The settings of one substep, copied out of [`crate::config::StepConfig`].
 #[derive(Clone, Copy, Debug)]
@@ -74,12 +98,14 @@ pub struct MarbleIn {
     pub x0: Vec3,
     /// Velocity at the substep's start, before this step's forces.
     pub v0: Vec3,
+    /// Angular velocity at the substep's start, when the marble spins (rolling on).
+    pub w0: Option<Vec3>,
     /// Acceleration over the substep.
     pub a: Vec3,
     /// Radius.
     pub r: f32,
-    /// Restitution.
-    pub restitution: f32,
+    /// The marble's contact coefficients.
+    pub material: Material,
 }
 
 /// What detection found for a marble, handed to [`resolve`].
@@ -93,69 +119,110 @@ pub enum Found<'a> {
     Overlap,
 }
 
-/// Runs the event loop of the module docs for one marble; returns its displacement from
-/// `m.x0` over the substep and its end velocity, and records its contacts.
+/// A marble's state inside the event loop.
+#[derive(Clone, Copy, Debug)]
+struct State {
+    /// Displacement from `x0`: small numbers, added to the position once at the end with
+    /// compensated summation, so that f32 keeps sub-ulp motion far from the origin and at
+    /// tiny steps.
+    d: Vec3,
+    /// Velocity: the integrator's reported velocity until converted at the start, then the
+    /// path velocity (see `Integrator`).
+    v: Vec3,
+    /// Angular velocity (zero and unused when the marble does not spin).
+    w: Vec3,
+    /// Whether the marble spins.
+    spins: bool,
+    /// Radius.
+    r: f32,
+}
+
+/// What [`settle`] leaves the marble with until the next event.
+#[derive(Clone, Copy, Debug)]
+struct Motion {
+    /// Linear acceleration (constraints and friction included).
+    a: Vec3,
+    /// Angular acceleration.
+    alpha: Vec3,
+    /// Time after which kinetic friction will have stopped a slip, or rolling resistance or
+    /// spin damping a spin (an event of the loop), if it does.
+    slip_stops: Option<f32>,
+}
+
+/// The result of [`resolve`] for one marble.
+#[derive(Clone, Copy, Debug)]
+pub struct MarbleOut {
+    /// Displacement from `x0` over the substep.
+    pub d: Vec3,
+    /// Velocity at the end (the integrator's reported velocity).
+    pub v: Vec3,
+    /// Angular velocity at the end (unchanged input when the marble does not spin).
+    pub w: Vec3,
+}
+
+/// Runs the event loop of the module docs for one marble and records its contacts.
 pub fn resolve(
     boards: &[BoardSnapshot],
     p: &SubstepParams,
     m: &MarbleIn,
     found: Found<'_>,
     contacts: &mut Contacts,
-) -> (Vec3, Vec3) {
+) -> MarbleOut {
     let tol = crate::narrow::touch_tolerance(p.tolerance, m.r, m.x0);
     let sep = separation_speed(p.threshold);
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut touches = TouchList::default();
     let mut t = 0.0f32;
-    // Displacement from `x0`: small numbers, added to the position once at the end with
-    // compensated summation, so that f32 keeps sub-ulp motion far from the origin and at
-    // tiny steps.
-    let mut d = Vec3::ZERO;
-    // The integrator's reported velocity until converted: collisions and contacts at the
-    // start are judged on the velocity before this step's forces.
-    let mut v = m.v0;
+    let mut s = State {
+        d: Vec3::ZERO,
+        // Collisions and contacts at the start are judged on the velocity before this
+        // step's forces.
+        v: m.v0,
+        w: m.w0.unwrap_or(Vec3::ZERO),
+        spins: m.w0.is_some(),
+        r: m.r,
+    };
     let mut impacts = 0;
     contacts.clear();
     // Whether the end-of-substep check can be skipped: see below.
     let mut settled_start = matches!(found, Found::Touching(_));
+    let regather = |t: f32, s: &State, touches: &mut TouchList| {
+        gather(boards, t, m.x0 + s.d, m.r, tol, &m.material, -s.v, touches);
+    };
 
-    // From here on `v` is the path velocity (see `Integrator`), and `a` the acceleration
-    // left after the constraints of the touches the marble rests on.
-    let mut a = match found {
+    // From here on `s.v` is the path velocity (see `Integrator`), and `motion` the
+    // accelerations left after the constraints and friction of the touches.
+    let mut motion = match found {
         Found::Touching(start) => {
             touches = *start;
-            respond(&touches, &mut v, p.threshold, boards, 0.0, contacts);
-            let a = settle(&touches, &mut d, &mut v, m.a, sep);
-            v += offset(a);
-            a
+            respond(&touches, &mut s, p.threshold, boards, 0.0, contacts);
+            let motion = settle(&touches, &mut s, m.a, sep);
+            s.v += offset(motion.a);
+            motion
         }
         Found::Impact(tau) => {
-            v += offset(m.a);
-            let (dd, vv) = free_step(v, m.a, tau);
-            (d, v) = (d + dd, vv);
+            s.v += offset(m.a);
+            advance(&mut s, &free(m.a), tau);
             t = tau;
             impacts = 1;
-            gather(
-                boards,
-                t,
-                m.x0 + d,
-                m.r,
-                tol,
-                m.restitution,
-                -v,
-                &mut touches,
-            );
-            respond(&touches, &mut v, p.threshold, boards, t, contacts);
-            settle(&touches, &mut d, &mut v, m.a, sep)
+            regather(t, &s, &mut touches);
+            respond(&touches, &mut s, p.threshold, boards, t, contacts);
+            settle(&touches, &mut s, m.a, sep)
         }
         Found::Overlap => {
-            v += offset(m.a);
-            m.a
+            s.v += offset(m.a);
+            free(m.a)
         }
     };
 
     while t < p.h {
         let span = p.h - t;
+        // A slip that stops inside the span is an event: friction changes from kinetic to
+        // static there.
+        let (reach, slip_event) = match motion.slip_stops {
+            Some(ts) if ts < span => (ts, true),
+            _ => (span, false),
+        };
         if p.ccd {
             if impacts >= p.max_impacts {
                 // Wedged: stay at the last safe position for the rest of the substep.
@@ -163,33 +230,29 @@ pub fn resolve(
             }
             let path = Path {
                 t0: t,
-                x: m.x0 + d,
-                v,
-                a,
+                x: m.x0 + s.d,
+                v: s.v,
+                a: motion.a,
             };
-            if let Some((tau, _)) = earliest_impact(boards, &path, span, m.r, tol, &touches) {
-                let (dd, vv) = free_step(v, a, tau);
-                (d, v) = (d + dd, vv);
+            if let Some((tau, _)) = earliest_impact(boards, &path, reach, m.r, tol, &touches) {
+                advance(&mut s, &motion, tau);
                 t += tau;
                 settled_start = false;
                 impacts += 1;
-                gather(
-                    boards,
-                    t,
-                    m.x0 + d,
-                    m.r,
-                    tol,
-                    m.restitution,
-                    -v,
-                    &mut touches,
-                );
-                respond(&touches, &mut v, p.threshold, boards, t, contacts);
-                a = settle(&touches, &mut d, &mut v, m.a, sep);
+                regather(t, &s, &mut touches);
+                respond(&touches, &mut s, p.threshold, boards, t, contacts);
+                motion = settle(&touches, &mut s, m.a, sep);
                 continue;
             }
         }
-        let (dd, vv) = free_step(v, a, span);
-        (d, v) = (d + dd, vv);
+        advance(&mut s, &motion, reach);
+        if slip_event {
+            t += reach;
+            settled_start = false;
+            regather(t, &s, &mut touches);
+            motion = settle(&touches, &mut s, m.a, sep);
+            continue;
+        }
         t = p.h;
         break;
     }
@@ -197,36 +260,33 @@ pub fn resolve(
     // The end-of-substep check finds nothing when the marble spent the whole substep on
     // the touches it started with, all of them complete (no other piece within reach),
     // not overlapping, sustained (not leaving: normal speed and acceleration into them
-    // removed) and on static boards: each piece is convex, so it lies behind its tangent plane, and a path
-    // that never approaches that plane never enters it; every other piece was watched by
-    // continuous collision. That is the common case of a marble resting or sliding.
+    // removed), convex and on static boards: a convex piece lies behind its tangent plane,
+    // and a path that never approaches that plane never enters it; every other piece was
+    // watched by continuous collision. That is the common case of a marble resting,
+    // sliding or rolling.
     if p.ccd
         && settled_start
         && t >= p.h
         && touches.is_complete()
         && touches.as_slice().iter().all(|tc| {
-            !boards[tc.piece.board()].is_moving()
+            tc.convex
+                && !boards[tc.piece.board()].is_moving()
                 && tc.gap >= 0.0
-                && (v - tc.board_velocity).dot(tc.normal) <= sep
-                && a.dot(tc.normal) >= 0.0
+                && (s.v - tc.board_velocity).dot(tc.normal) <= sep
+                && motion.a.dot(tc.normal) >= 0.0
         })
     {
-        return (d, v - offset(a));
+        return MarbleOut {
+            d: s.d,
+            v: s.v - offset(motion.a),
+            w: s.w,
+        };
     }
 
     // End of substep: resolve what still overlaps, or touches while approaching.
-    gather(
-        boards,
-        p.h,
-        m.x0 + d,
-        m.r,
-        tol,
-        m.restitution,
-        -v,
-        &mut touches,
-    );
+    regather(p.h, &s, &mut touches);
     for tc in touches.as_slice() {
-        let u = (v - tc.board_velocity).dot(tc.normal);
+        let u = (s.v - tc.board_velocity).dot(tc.normal);
         if tc.gap >= 0.0 && u >= 0.0 {
             record(contacts, boards, tc, ContactKind::Contact, u, p.h);
             continue;
@@ -242,27 +302,45 @@ pub fn resolve(
             // Found late (no CCD): the end velocity carries the gravity of the time spent
             // inside the board, so equation (1) takes the approach speed before this step's
             // forces: the normal speed after is `−e·u0`, never more than came in.
-            v += (-tc.restitution * u0 - u) * tc.normal;
+            s.v += (-tc.material.restitution * u0 - u) * tc.normal;
         } else if u < 0.0 {
-            v -= u * tc.normal;
+            s.v -= u * tc.normal;
         }
         if tc.gap < 0.0 {
             // Onto the surface; no velocity is added for it.
-            d -= tc.gap * tc.normal;
+            s.d -= tc.gap * tc.normal;
         }
         record(contacts, boards, tc, kind, if p.ccd { u } else { u0 }, p.h);
     }
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
-    let a_end = settle(&touches, &mut d, &mut v, m.a, sep);
-    (d, v - offset(a_end))
+    let end = settle(&touches, &mut s, m.a, sep);
+    MarbleOut {
+        d: s.d,
+        v: s.v - offset(end.a),
+        w: s.w,
+    }
 }
 
-/// Displacement and velocity after `tau` on the exact path of constant acceleration:
-/// `(v τ + ½ a τ², v + a τ)`.
+/// Free motion under `a`: no constraint, no friction.
 #[inline]
-fn free_step(v: Vec3, a: Vec3, tau: f32) -> (Vec3, Vec3) {
-    (v * tau + a * (0.5 * tau * tau), v + a * tau)
+fn free(a: Vec3) -> Motion {
+    Motion {
+        a,
+        alpha: Vec3::ZERO,
+        slip_stops: None,
+    }
+}
+
+/// Advances the state by `tau` on the exact path of constant accelerations:
+/// `d += v τ + ½ a τ²`, `v += a τ`, `ω += α τ`.
+#[inline]
+fn advance(s: &mut State, m: &Motion, tau: f32) {
+    s.d += s.v * tau + m.a * (0.5 * tau * tau);
+    s.v += m.a * tau;
+    if s.spins {
+        s.w += m.alpha * tau;
+    }
 }
 
 /// Below this normal speed (m/s) a marble is not leaving the surface it touches.
@@ -271,11 +349,27 @@ pub fn separation_speed(threshold: f32) -> f32 {
     (1e-3 * threshold).max(1e-6)
 }
 
+/// Velocity of the marble's contact point relative to the board, tangential part.
+#[inline]
+fn slip(s: &State, tc: &Touch) -> Vec3 {
+    let vc = s.v + s.w.cross(-s.r * tc.normal) - tc.board_velocity;
+    vc - vc.dot(tc.normal) * tc.normal
+}
+
+/// Applies a tangential impulse per unit mass `j` at the contact of normal `n`: the
+/// velocity changes by `j`, the spin by `(5 / 2r²)(−r n × j)`.
+#[inline]
+fn push_tangential(s: &mut State, n: Vec3, j: Vec3) {
+    s.v += j;
+    s.w += (-2.5 / s.r) * n.cross(j);
+}
+
 /// Step 2 of the module docs: collisions get equation (1), contacts lose their approaching
-/// normal velocity; every touch is recorded.
+/// normal velocity, and (for spinning marbles) friction impulses at most `μ` × each normal
+/// impulse act against the slip; every touch is recorded.
 fn respond(
     touches: &TouchList,
-    v: &mut Vec3,
+    s: &mut State,
     threshold: f32,
     boards: &[BoardSnapshot],
     t: f32,
@@ -283,9 +377,10 @@ fn respond(
 ) {
     let list = touches.as_slice();
     let mut target = [f32::NEG_INFINITY; MAX_TOUCHES];
+    let mut normal_impulse = [0.0f32; MAX_TOUCHES];
     let mut any = false;
     for (i, tc) in list.iter().enumerate() {
-        let u = (*v - tc.board_velocity).dot(tc.normal);
+        let u = (s.v - tc.board_velocity).dot(tc.normal);
         let kind = if u < -threshold {
             ContactKind::Collision
         } else {
@@ -295,7 +390,7 @@ fn respond(
             // In the board's frame the normal part of the relative velocity becomes
             // −e·u_n: equation (1) written as a target normal speed.
             target[i] = if kind == ContactKind::Collision {
-                -tc.restitution * u
+                -tc.material.restitution * u
             } else {
                 0.0
             };
@@ -309,14 +404,32 @@ fn respond(
     for _ in 0..4 {
         let mut changed = false;
         for (i, tc) in list.iter().enumerate() {
-            let u = (*v - tc.board_velocity).dot(tc.normal);
+            let u = (s.v - tc.board_velocity).dot(tc.normal);
             if u < target[i] {
-                *v += (target[i] - u) * tc.normal;
+                s.v += (target[i] - u) * tc.normal;
+                normal_impulse[i] += target[i] - u;
                 changed = true;
             }
         }
         if !changed {
             break;
+        }
+    }
+    if s.spins {
+        for (i, tc) in list.iter().enumerate() {
+            if normal_impulse[i] <= 0.0 {
+                continue;
+            }
+            // The impulse that stops the slip is −(2/7) of it (the contact point's
+            // effective mass for a solid sphere is 2/7 m); Coulomb caps it at μ·J_n.
+            let slip = slip(s, tc);
+            let mut j = -(2.0 / 7.0) * slip;
+            let cap = tc.material.friction * normal_impulse[i];
+            let len = j.length();
+            if len > cap {
+                j *= cap / len;
+            }
+            push_tangential(s, tc.normal, j);
         }
     }
 }
@@ -325,27 +438,31 @@ fn respond(
 /// relative to the board within `sep`), the marble is put on the surface (it is within the
 /// touching tolerance, so this moves it by less than that), its residual normal speed
 /// relative to the board is removed, and so is the part of the acceleration that pushes
-/// into the board. Returns that constrained acceleration. Without the first two, rounding
-/// would let a resting or sliding marble drift off its surface by ulps per step.
+/// into the board. Without the first two, rounding would let a resting or sliding marble
+/// drift off its surface by ulps per step. For spinning marbles, friction, rolling
+/// resistance and spin damping then act on those touches (module docs, "Rolling").
 #[inline]
-fn settle(touches: &TouchList, d: &mut Vec3, v: &mut Vec3, a: Vec3, sep: f32) -> Vec3 {
+fn settle(touches: &TouchList, s: &mut State, a: Vec3, sep: f32) -> Motion {
     let mut a = a;
-    for tc in touches.as_slice() {
-        let u = (*v - tc.board_velocity).dot(tc.normal);
+    let list = touches.as_slice();
+    for tc in list {
+        let u = (s.v - tc.board_velocity).dot(tc.normal);
         if u <= sep {
             if tc.gap > 0.0 {
-                *d -= tc.gap * tc.normal;
+                s.d -= tc.gap * tc.normal;
             }
-            *v -= u * tc.normal;
+            s.v -= u * tc.normal;
         }
     }
+    let mut normal_force = [0.0f32; MAX_TOUCHES];
     for _ in 0..4 {
         let mut changed = false;
-        for tc in touches.as_slice() {
-            if (*v - tc.board_velocity).dot(tc.normal) <= sep {
+        for (i, tc) in list.iter().enumerate() {
+            if (s.v - tc.board_velocity).dot(tc.normal) <= sep {
                 let an = a.dot(tc.normal);
                 if an < 0.0 {
                     a -= an * tc.normal;
+                    normal_force[i] -= an;
                     changed = true;
                 }
             }
@@ -354,13 +471,94 @@ fn settle(touches: &TouchList, d: &mut Vec3, v: &mut Vec3, a: Vec3, sep: f32) ->
             break;
         }
     }
-    a
+    let mut motion = free(a);
+    if s.spins {
+        for (i, tc) in list.iter().enumerate() {
+            if normal_force[i] > 0.0 {
+                friction(s, tc, normal_force[i], &mut motion);
+            }
+        }
+    }
+    motion
+}
+
+/// Slip below this speed (m/s) is rolling.
+const ROLLING_SLIP: f32 = 1e-5;
+
+/// Friction, rolling resistance and spin damping of one sustained touch with normal force
+/// `nf` per unit mass, added to `motion` (module docs, "Rolling").
+fn friction(s: &mut State, tc: &Touch, nf: f32, motion: &mut Motion) {
+    let n = tc.normal;
+    let r = s.r;
+    let rc = -r * n;
+    let mu = tc.material.friction;
+    // Rolling resistance: a torque c·N·r against the spin's tangential part, and spin
+    // damping: k·N·r against its normal part; per unit mass, α = torque · 5 / (2 r²). Each
+    // stops its spin component at a time found in closed form (an event, after which that
+    // component is zero and the torque is off), so neither ever reverses the spin.
+    let mut alpha = Vec3::ZERO;
+    let w_t = s.w - s.w.dot(n) * n;
+    let rr = 2.5 * tc.material.rolling_resistance * nf / r;
+    let rolling_spin = rr > 0.0 && w_t.length() * r > ROLLING_SLIP;
+    if rolling_spin {
+        alpha -= rr * w_t.normalize();
+    }
+    let w_n = s.w.dot(n);
+    let sd = 2.5 * tc.material.spin_damping * nf / r;
+    if sd > 0.0 && w_n.abs() * r > ROLLING_SLIP {
+        alpha -= sd * w_n.signum() * n;
+        stop_at(motion, w_n.abs() / sd);
+    }
+    // The contact point's tangential acceleration without friction.
+    let a_c = {
+        let raw = motion.a + (motion.alpha + alpha).cross(rc);
+        raw - raw.dot(n) * n
+    };
+    let slip = slip(s, tc);
+    let f = if slip.length() <= ROLLING_SLIP {
+        // Rolling: remove the residual slip (rounding), then hold it at zero with static
+        // friction if Coulomb allows.
+        push_tangential(s, n, -(2.0 / 7.0) * slip);
+        let f = -(2.0 / 7.0) * a_c;
+        let cap = mu * nf;
+        if f.length() <= cap {
+            f
+        } else {
+            f * (cap / f.length())
+        }
+    } else {
+        let dir = slip.normalize();
+        let f = -mu * nf * dir;
+        // The slip changes at a_c + (7/2) f; along its own direction it reaches zero at
+        // `|slip| / rate` when the rate opposes it.
+        let rate = (a_c + 3.5 * f).dot(dir);
+        if rate < 0.0 {
+            stop_at(motion, slip.length() / -rate);
+        }
+        f
+    };
+    let alpha = alpha + (-2.5 / r) * n.cross(f);
+    if rolling_spin {
+        // The rolling spin decays at its total rate (static friction included).
+        let rate = alpha.dot(w_t.normalize());
+        if rate < 0.0 {
+            stop_at(motion, w_t.length() / -rate);
+        }
+    }
+    motion.a += f;
+    motion.alpha += alpha;
+}
+
+/// Notes that the friction regime changes (a slip or a spin stops) `after` seconds.
+#[inline]
+fn stop_at(motion: &mut Motion, after: f32) {
+    motion.slip_stops = Some(motion.slip_stops.map_or(after, |t| t.min(after)));
 }
 
 fn record(
     contacts: &mut Contacts,
     boards: &[BoardSnapshot],
-    tc: &crate::narrow::Touch,
+    tc: &Touch,
     kind: ContactKind,
     closing_speed: f32,
     time: f32,

@@ -66,7 +66,7 @@ pub struct Scene {
     pub preset: Option<Preset>,
     /// Continuous collision.
     pub ccd: bool,
-    /// Spin and friction at contacts (not yet supported).
+    /// Spin and friction at contacts (marbles roll).
     pub rolling: bool,
     /// Marble–marble collisions (not yet supported).
     pub marble_collisions: bool,
@@ -124,6 +124,12 @@ pub struct BoardDesc {
     /// ≥ 0.
     #[serde(default = "half")]
     pub friction: f32,
+    /// Rolling resistance, ≥ 0 (used when rolling is on).
+    #[serde(default)]
+    pub rolling_resistance: f32,
+    /// Spin damping about the contact normal, ≥ 0 (used when rolling is on).
+    #[serde(default)]
+    pub spin_damping: f32,
 }
 
 /// A marble.
@@ -150,6 +156,12 @@ pub struct MarbleDesc {
     /// ≥ 0.
     #[serde(default = "half")]
     pub friction: f32,
+    /// Rolling resistance, ≥ 0 (used when rolling is on).
+    #[serde(default)]
+    pub rolling_resistance: f32,
+    /// Spin damping about the contact normal, ≥ 0 (used when rolling is on).
+    #[serde(default)]
+    pub spin_damping: f32,
 }
 
 impl MarbleDesc {
@@ -163,6 +175,8 @@ impl MarbleDesc {
             mass: None,
             restitution: 0.5,
             friction: 0.5,
+            rolling_resistance: 0.0,
+            spin_damping: 0.0,
         }
     }
 }
@@ -178,6 +192,8 @@ impl BoardDesc {
             angular_velocity: [0.0; 3],
             restitution: 0.5,
             friction: 0.5,
+            rolling_resistance: 0.0,
+            spin_damping: 0.0,
         }
     }
 }
@@ -323,12 +339,6 @@ impl Scene {
             }
         }
         non_negative("duration", self.duration)?;
-        if self.rolling {
-            return Err(SceneError::Unsupported {
-                field: "rolling".into(),
-                what: "rolling (spin and friction)".into(),
-            });
-        }
         if self.marble_collisions {
             return Err(SceneError::Unsupported {
                 field: "marble_collisions".into(),
@@ -344,6 +354,8 @@ impl Scene {
             finite3(&f("angular_velocity"), b.angular_velocity)?;
             unit_interval(&f("restitution"), b.restitution)?;
             non_negative(&f("friction"), b.friction)?;
+            non_negative(&f("rolling_resistance"), b.rolling_resistance)?;
+            non_negative(&f("spin_damping"), b.spin_damping)?;
         }
         for (i, m) in self.marbles.iter().enumerate() {
             let f = |name: &str| format!("marbles[{i}].{name}");
@@ -365,6 +377,8 @@ impl Scene {
             }
             unit_interval(&f("restitution"), m.restitution)?;
             non_negative(&f("friction"), m.friction)?;
+            non_negative(&f("rolling_resistance"), m.rolling_resistance)?;
+            non_negative(&f("spin_damping"), m.spin_damping)?;
         }
         Ok(())
     }
@@ -411,6 +425,7 @@ impl Scene {
             integrator: self.integrator,
             ccd: self.ccd,
             restitution_threshold: self.restitution_threshold,
+            rolling: self.rolling,
             ..StepConfig::default()
         };
         if let Some(preset) = self.preset {

@@ -58,7 +58,12 @@ pub fn substep_schedule() -> Schedule {
         forces::accumulate_forces.in_set(MarbleSystems::AccumulateForces),
         integrate::integrate.in_set(MarbleSystems::Integrate),
         detect::detect_contacts.in_set(MarbleSystems::DetectContacts),
-        respond::respond.in_set(MarbleSystems::Respond),
+        (
+            respond::respond,
+            boards::rotate_marbles.run_if(|c: Res<StepConfig>| c.rolling),
+        )
+            .chain()
+            .in_set(MarbleSystems::Respond),
         boards::move_boards.in_set(MarbleSystems::MoveBoards),
         (forces::clear_forces, forces::quarantine_non_finite)
             .chain()

@@ -5,7 +5,7 @@ use glam::Vec3;
 
 use crate::components::{
     AngularVelocity, Board, Collider, Friction, Marble, Mass, Position, Quarantined, Radius,
-    Restitution, Rotation, Velocity,
+    Restitution, RollingResistance, Rotation, SpinDamping, Velocity,
 };
 use crate::scene::{Scene, SceneError, quat};
 use crate::schedule::{init_resources, run_step, substep_schedule};
@@ -58,6 +58,8 @@ impl Simulation {
                         AngularVelocity(Vec3::from_array(b.angular_velocity)),
                         Restitution(b.restitution),
                         Friction(b.friction),
+                        RollingResistance(b.rolling_resistance),
+                        SpinDamping(b.spin_damping),
                     ))
                     .id()
             })
@@ -66,17 +68,25 @@ impl Simulation {
             .marbles
             .iter()
             .map(|m| {
-                world
-                    .spawn((
-                        Marble,
-                        Position(Vec3::from_array(m.position)),
-                        Velocity(Vec3::from_array(m.velocity)),
-                        Radius(m.radius),
-                        m.mass.map_or_else(|| Mass::glass(m.radius), Mass::new),
-                        Restitution(m.restitution),
-                        Friction(m.friction),
-                    ))
-                    .id()
+                let mut marble = world.spawn((
+                    Marble,
+                    Position(Vec3::from_array(m.position)),
+                    Velocity(Vec3::from_array(m.velocity)),
+                    Radius(m.radius),
+                    m.mass.map_or_else(|| Mass::glass(m.radius), Mass::new),
+                    Restitution(m.restitution),
+                    Friction(m.friction),
+                ));
+                // Spin exists only when the scene asks for rolling.
+                if scene.rolling {
+                    marble.insert((
+                        AngularVelocity(Vec3::from_array(m.angular_velocity)),
+                        Rotation::default(),
+                        RollingResistance(m.rolling_resistance),
+                        SpinDamping(m.spin_damping),
+                    ));
+                }
+                marble.id()
             })
             .collect();
         let mut schedule = substep_schedule();
@@ -132,6 +142,13 @@ impl Simulation {
             .filter(|(_, e)| self.world.get::<Quarantined>(**e).is_some())
             .map(|(i, _)| i)
             .collect()
+    }
+
+    /// Angular velocity of the scene's marble `index` (zero when it does not spin).
+    pub fn marble_spin(&self, index: usize) -> Vec3 {
+        self.world
+            .get::<AngularVelocity>(self.marbles[index])
+            .map_or(Vec3::ZERO, |w| w.0)
     }
 
     /// Position and velocity of the scene's marble `index`.

@@ -5,7 +5,8 @@ use glam::{Quat, Vec3};
 use parry3d::bounding_volume::Aabb;
 
 use crate::components::{
-    AngularVelocity, Board, Collider, Friction, Position, Restitution, Rotation, Velocity,
+    AngularVelocity, Board, Collider, Friction, Position, Restitution, RollingResistance, Rotation,
+    SpinDamping, Velocity,
 };
 use crate::config::StepConfig;
 use crate::geometry::transform_aabb;
@@ -26,6 +27,8 @@ pub fn prepare_boards(
             &AngularVelocity,
             &Restitution,
             &Friction,
+            Option<&RollingResistance>,
+            Option<&SpinDamping>,
         ),
         With<Board>,
     >,
@@ -34,7 +37,18 @@ pub fn prepare_boards(
     let cache = cache.as_mut();
     cache.h = h;
     cache.boards.clear();
-    for (entity, collider, position, rotation, velocity, angular, restitution, friction) in &boards
+    for (
+        entity,
+        collider,
+        position,
+        rotation,
+        velocity,
+        angular,
+        restitution,
+        friction,
+        rolling_resistance,
+        spin_damping,
+    ) in &boards
     {
         let local = collider.0.local_aabb();
         let reach = local.map_or(f32::INFINITY, |a| a.mins.abs().max(a.maxs.abs()).length());
@@ -59,6 +73,8 @@ pub fn prepare_boards(
             angular_velocity: angular.0,
             restitution: restitution.0,
             friction: friction.0,
+            rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
+            spin_damping: spin_damping.map_or(0.0, |c| c.0),
             swept_aabb,
             reach,
         });
@@ -75,6 +91,23 @@ pub fn move_boards(
         if velocity.0 != Vec3::ZERO {
             position.0 += velocity.0 * h;
         }
+        if angular.0 != Vec3::ZERO {
+            rotation.0 = (Quat::from_scaled_axis(angular.0 * h) * rotation.0).normalize();
+        }
+    }
+}
+
+/// Turns every spinning marble's [`Rotation`] by its angular velocity over the substep
+/// (runs only when rolling is modelled).
+pub fn rotate_marbles(
+    cache: Res<BoardCache>,
+    mut marbles: Query<
+        (&mut Rotation, &AngularVelocity),
+        (With<crate::components::Marble>, Without<Board>),
+    >,
+) {
+    let h = cache.h;
+    for (mut rotation, angular) in &mut marbles {
         if angular.0 != Vec3::ZERO {
             rotation.0 = (Quat::from_scaled_axis(angular.0 * h) * rotation.0).normalize();
         }

@@ -7,7 +7,9 @@ use crate::components::{
     Restitution, StepStart,
 };
 use crate::config::StepConfig;
-use crate::narrow::{BoardCache, Path, TouchList, earliest_impact, gather, touch_tolerance};
+use crate::narrow::{
+    BoardCache, Material, Path, TouchList, earliest_impact, gather, touch_tolerance,
+};
 
 /// For every marble: the board pieces it touches at the substep's start, each classified
 /// by its normal closing speed *before this step's forces* (a collision above
@@ -46,7 +48,10 @@ pub fn detect_contacts(
             start.position,
             r,
             tol,
-            restitution.0,
+            &Material {
+                restitution: restitution.0,
+                ..Material::default()
+            },
             -start.velocity,
             &mut touches,
         );
@@ -89,7 +94,10 @@ pub fn detect_contacts(
                 position.0,
                 r,
                 tol_end,
-                restitution.0,
+                &Material {
+                    restitution: restitution.0,
+                    ..Material::default()
+                },
                 -start.velocity,
                 &mut touches,
             );

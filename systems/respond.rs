@@ -3,11 +3,12 @@
 use bevy_ecs::prelude::*;
 
 use crate::components::{
-    Acceleration, Contacts, Marble, Pending, Position, PositionCarry, Quarantined, Radius,
-    Restitution, StepStart, Velocity, compensated_add,
+    Acceleration, AngularVelocity, Contacts, Friction, Marble, Pending, Position, PositionCarry,
+    Quarantined, Radius, Restitution, RollingResistance, SpinDamping, StepStart, Velocity,
+    compensated_add,
 };
 use crate::config::StepConfig;
-use crate::narrow::{BoardCache, TouchList, gather, touch_tolerance};
+use crate::narrow::{BoardCache, Material, TouchList, gather, touch_tolerance};
 use crate::response::{Found, MarbleIn, SubstepParams, resolve};
 
 /// Resolves every flagged marble through the substep's event loop
@@ -19,14 +20,19 @@ pub fn respond(
     cache: Res<BoardCache>,
     mut marbles: Query<
         (
-            &mut Position,
-            &mut PositionCarry,
-            &mut Velocity,
-            &StepStart,
-            &Acceleration,
-            &Radius,
-            &Restitution,
-            &mut Contacts,
+            (
+                &mut Position,
+                &mut PositionCarry,
+                &mut Velocity,
+                Option<&mut AngularVelocity>,
+            ),
+            (&StepStart, &Acceleration, &Radius, &mut Contacts),
+            (
+                &Restitution,
+                &Friction,
+                Option<&RollingResistance>,
+                Option<&SpinDamping>,
+            ),
         ),
         (With<Marble>, Without<Quarantined>),
     >,
@@ -42,14 +48,9 @@ pub fn respond(
     };
     let mut touches = TouchList::default();
     for (
-        mut position,
-        mut carry,
-        mut velocity,
-        start,
-        acceleration,
-        radius,
-        restitution,
-        mut contacts,
+        (mut position, mut carry, mut velocity, mut spin),
+        (start, acceleration, radius, mut contacts),
+        (restitution, friction, rolling_resistance, spin_damping),
     ) in &mut marbles
     {
         if contacts.pending == Pending::None {
@@ -58,9 +59,19 @@ pub fn respond(
         let marble = MarbleIn {
             x0: start.position,
             v0: start.velocity,
+            w0: if config.rolling {
+                spin.as_ref().map(|w| w.0)
+            } else {
+                None
+            },
             a: acceleration.0,
             r: radius.0,
-            restitution: restitution.0,
+            material: Material {
+                restitution: restitution.0,
+                friction: friction.0,
+                rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
+                spin_damping: spin_damping.map_or(0.0, |c| c.0),
+            },
         };
         let found = match contacts.pending {
             Pending::Touching { complete } => {
@@ -69,7 +80,7 @@ pub fn respond(
                 if contacts.len() < crate::components::MAX_CONTACTS {
                     touches.clear();
                     for c in contacts.iter() {
-                        touches.push_recorded(c, boards, marble.restitution);
+                        touches.push_recorded(c, boards, &marble.material);
                     }
                     touches.set_complete(complete);
                 } else {
@@ -80,7 +91,7 @@ pub fn respond(
                         marble.x0,
                         marble.r,
                         tol,
-                        marble.restitution,
+                        &marble.material,
                         -marble.v0,
                         &mut touches,
                     );
@@ -90,8 +101,14 @@ pub fn respond(
             Pending::Impact(tau) => Found::Impact(tau),
             Pending::Overlap | Pending::None => Found::Overlap,
         };
-        let (d, v) = resolve(boards, &params, &marble, found, &mut contacts);
-        (position.0, carry.0) = compensated_add(config.compensated, start.position, start.carry, d);
-        velocity.0 = v;
+        let out = resolve(boards, &params, &marble, found, &mut contacts);
+        (position.0, carry.0) =
+            compensated_add(config.compensated, start.position, start.carry, out.d);
+        velocity.0 = out.v;
+        if marble.w0.is_some()
+            && let Some(w) = spin.as_mut()
+        {
+            w.0 = out.w;
+        }
     }
 }

@@ -175,8 +175,12 @@ fn invalid_scenes_name_field_and_value() {
             "boards[0].shape.Compound[0].shape must be not a Compound (parts are not compounds), got Compound",
         ),
         (
-            "(rolling: true)",
-            "rolling: rolling (spin and friction) is not yet supported",
+            "(marbles: [(position: (0.0, 0.0, 0.0), rolling_resistance: -0.1)])",
+            "marbles[0].rolling_resistance must be >= 0, got -0.1",
+        ),
+        (
+            "(boards: [(shape: Plane(()), spin_damping: -1.0)])",
+            "boards[0].spin_damping must be >= 0, got -1",
         ),
         (
             "(marble_collisions: true)",
