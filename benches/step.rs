@@ -1,6 +1,8 @@
 //! Steps N marbles on a 1°-tilted walled board (`scenes::walled_board`, bench scene (a)):
 //! the cost of one marble-step of the smooth-surface model, for N = 1k, 10k, 100k.
 //!
+//! The `rolling` group steps 10,000 of them with rolling off and on.
+//!
 //! `cargo bench --bench step`; criterion reports the time per step and, with
 //! `Throughput::Elements(N)`, marble-steps per second (ns per marble-step = 1e9 / that).
 //!
@@ -43,5 +45,36 @@ fn walled_board(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, walled_board);
+/// The same 10,000-marble walled board with rolling off (the smooth model: no spin stored,
+/// no rolling system run) and on (spin, friction and rolling, `rolling: true`).
+fn rolling(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rolling");
+    let n = 10_000;
+    for on in [false, true] {
+        let mut scene = scenes::walled_board(n);
+        scene.rolling = on;
+        let fresh = || Simulation::from_scene(&scene).expect("bench scene is valid");
+        let mut sim = fresh();
+        group.throughput(Throughput::Elements(n as u64));
+        group.sample_size(20);
+        let name = if on { "on" } else { "off" };
+        group.bench_with_input(BenchmarkId::from_parameter(name), &n, |b, _| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                for _ in 0..iters {
+                    if sim.steps() >= STEPS_PER_BUILD {
+                        sim = fresh();
+                    }
+                    let start = Instant::now();
+                    sim.step();
+                    total += start.elapsed();
+                }
+                total
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, walled_board, rolling);
 criterion_main!(benches);

@@ -218,6 +218,17 @@ impl BoardGeometry {
         }
     }
 
+    /// Whether every piece of part `part` is convex.
+    #[inline]
+    pub fn part_is_convex(&self, part: usize) -> bool {
+        match self.parts[part].shape {
+            PartShape::HalfSpace(_)
+            | PartShape::Cuboid(_)
+            | PartShape::TriMesh(_)
+            | PartShape::HeightField(_) => true,
+        }
+    }
+
     /// The piece `(part, sub)` as enumerated by [`Self::for_each_piece`].
     pub fn piece(&self, part: usize, sub: u32) -> Piece {
         match &self.parts[part].shape {

@@ -238,7 +238,7 @@ impl TouchList {
             gap: -c.depth,
             board_velocity: b.point_velocity(0.0, c.point),
             material: marble.combine(b),
-            convex: b.geometry.piece(c.piece.part(), c.piece.sub()).is_convex(),
+            convex: b.geometry.part_is_convex(c.piece.part()),
         };
         self.len += 1;
     }

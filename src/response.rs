@@ -91,6 +91,20 @@ pub struct SubstepParams {
     pub max_impacts: u32,
 }
 
+impl SubstepParams {
+    /// The settings of a substep of length `h` under `config`.
+    pub fn from_config(config: &crate::config::StepConfig, h: f32) -> Self {
+        SubstepParams {
+            h,
+            integrator: config.integrator,
+            ccd: config.ccd,
+            threshold: config.restitution_threshold,
+            tolerance: config.contact_tolerance,
+            max_impacts: config.max_impacts,
+        }
+    }
+}
+
 /// One marble's input to [`resolve`].
 #[derive(Clone, Copy, Debug)]
 pub struct MarbleIn {
@@ -110,9 +124,9 @@ pub struct MarbleIn {
 
 /// What detection found for a marble, handed to [`resolve`].
 #[derive(Clone, Copy, Debug)]
-pub enum Found<'a> {
-    /// Touches at the substep's start.
-    Touching(&'a TouchList),
+pub enum Found {
+    /// Touches at the substep's start, already in the touch list given to [`resolve`].
+    Touching,
     /// No touch at the start; the first impact along the free path at this time.
     Impact(f32),
     /// No touch at the start; overlap at the end of the free path (`ccd` off).
@@ -131,8 +145,6 @@ struct State {
     v: Vec3,
     /// Angular velocity (zero and unused when the marble does not spin).
     w: Vec3,
-    /// Whether the marble spins.
-    spins: bool,
     /// Radius.
     r: f32,
 }
@@ -161,17 +173,36 @@ pub struct MarbleOut {
 }
 
 /// Runs the event loop of the module docs for one marble and records its contacts.
+/// `touches` is the loop's working list: it holds the start touches when `found` is
+/// [`Found::Touching`].
 pub fn resolve(
     boards: &[BoardSnapshot],
     p: &SubstepParams,
     m: &MarbleIn,
-    found: Found<'_>,
+    found: Found,
+    touches: &mut TouchList,
+    contacts: &mut Contacts,
+) -> MarbleOut {
+    // Two instances of one loop: a marble that does not spin pays nothing for rolling.
+    if m.w0.is_some() {
+        resolve_with::<true>(boards, p, m, found, touches, contacts)
+    } else {
+        resolve_with::<false>(boards, p, m, found, touches, contacts)
+    }
+}
+
+/// [`resolve`] for a marble that spins (`SPINS`) or not.
+fn resolve_with<const SPINS: bool>(
+    boards: &[BoardSnapshot],
+    p: &SubstepParams,
+    m: &MarbleIn,
+    found: Found,
+    touches: &mut TouchList,
     contacts: &mut Contacts,
 ) -> MarbleOut {
     let tol = crate::narrow::touch_tolerance(p.tolerance, m.r, m.x0);
     let sep = separation_speed(p.threshold);
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
-    let mut touches = TouchList::default();
     let mut t = 0.0f32;
     let mut s = State {
         d: Vec3::ZERO,
@@ -179,13 +210,12 @@ pub fn resolve(
         // step's forces.
         v: m.v0,
         w: m.w0.unwrap_or(Vec3::ZERO),
-        spins: m.w0.is_some(),
         r: m.r,
     };
     let mut impacts = 0;
     contacts.clear();
     // Whether the end-of-substep check can be skipped: see below.
-    let mut settled_start = matches!(found, Found::Touching(_));
+    let mut settled_start = matches!(found, Found::Touching);
     let regather = |t: f32, s: &State, touches: &mut TouchList| {
         gather(boards, t, m.x0 + s.d, m.r, tol, &m.material, -s.v, touches);
     };
@@ -193,21 +223,20 @@ pub fn resolve(
     // From here on `s.v` is the path velocity (see `Integrator`), and `motion` the
     // accelerations left after the constraints and friction of the touches.
     let mut motion = match found {
-        Found::Touching(start) => {
-            touches = *start;
-            respond(&touches, &mut s, p.threshold, boards, 0.0, contacts);
-            let motion = settle(&touches, &mut s, m.a, sep);
+        Found::Touching => {
+            respond::<SPINS>(touches, &mut s, p.threshold, boards, 0.0, contacts);
+            let motion = settle::<SPINS>(touches, &mut s, m.a, sep);
             s.v += offset(motion.a);
             motion
         }
         Found::Impact(tau) => {
             s.v += offset(m.a);
-            advance(&mut s, &free(m.a), tau);
+            advance::<SPINS>(&mut s, &free(m.a), tau);
             t = tau;
             impacts = 1;
-            regather(t, &s, &mut touches);
-            respond(&touches, &mut s, p.threshold, boards, t, contacts);
-            settle(&touches, &mut s, m.a, sep)
+            regather(t, &s, touches);
+            respond::<SPINS>(touches, &mut s, p.threshold, boards, t, contacts);
+            settle::<SPINS>(touches, &mut s, m.a, sep)
         }
         Found::Overlap => {
             s.v += offset(m.a);
@@ -234,23 +263,23 @@ pub fn resolve(
                 v: s.v,
                 a: motion.a,
             };
-            if let Some((tau, _)) = earliest_impact(boards, &path, reach, m.r, tol, &touches) {
-                advance(&mut s, &motion, tau);
+            if let Some((tau, _)) = earliest_impact(boards, &path, reach, m.r, tol, touches) {
+                advance::<SPINS>(&mut s, &motion, tau);
                 t += tau;
                 settled_start = false;
                 impacts += 1;
-                regather(t, &s, &mut touches);
-                respond(&touches, &mut s, p.threshold, boards, t, contacts);
-                motion = settle(&touches, &mut s, m.a, sep);
+                regather(t, &s, touches);
+                respond::<SPINS>(touches, &mut s, p.threshold, boards, t, contacts);
+                motion = settle::<SPINS>(touches, &mut s, m.a, sep);
                 continue;
             }
         }
-        advance(&mut s, &motion, reach);
+        advance::<SPINS>(&mut s, &motion, reach);
         if slip_event {
             t += reach;
             settled_start = false;
-            regather(t, &s, &mut touches);
-            motion = settle(&touches, &mut s, m.a, sep);
+            regather(t, &s, touches);
+            motion = settle::<SPINS>(touches, &mut s, m.a, sep);
             continue;
         }
         t = p.h;
@@ -284,7 +313,7 @@ pub fn resolve(
     }
 
     // End of substep: resolve what still overlaps, or touches while approaching.
-    regather(p.h, &s, &mut touches);
+    regather(p.h, &s, touches);
     for tc in touches.as_slice() {
         let u = (s.v - tc.board_velocity).dot(tc.normal);
         if tc.gap >= 0.0 && u >= 0.0 {
@@ -314,7 +343,7 @@ pub fn resolve(
     }
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
-    let end = settle(&touches, &mut s, m.a, sep);
+    let end = settle::<SPINS>(touches, &mut s, m.a, sep);
     MarbleOut {
         d: s.d,
         v: s.v - offset(end.a),
@@ -335,10 +364,10 @@ fn free(a: Vec3) -> Motion {
 /// Advances the state by `tau` on the exact path of constant accelerations:
 /// `d += v τ + ½ a τ²`, `v += a τ`, `ω += α τ`.
 #[inline]
-fn advance(s: &mut State, m: &Motion, tau: f32) {
+fn advance<const SPINS: bool>(s: &mut State, m: &Motion, tau: f32) {
     s.d += s.v * tau + m.a * (0.5 * tau * tau);
     s.v += m.a * tau;
-    if s.spins {
+    if SPINS {
         s.w += m.alpha * tau;
     }
 }
@@ -367,7 +396,7 @@ fn push_tangential(s: &mut State, n: Vec3, j: Vec3) {
 /// Step 2 of the module docs: collisions get equation (1), contacts lose their approaching
 /// normal velocity, and (for spinning marbles) friction impulses at most `μ` × each normal
 /// impulse act against the slip; every touch is recorded.
-fn respond(
+fn respond<const SPINS: bool>(
     touches: &TouchList,
     s: &mut State,
     threshold: f32,
@@ -415,7 +444,7 @@ fn respond(
             break;
         }
     }
-    if s.spins {
+    if SPINS {
         for (i, tc) in list.iter().enumerate() {
             if normal_impulse[i] <= 0.0 {
                 continue;
@@ -442,7 +471,7 @@ fn respond(
 /// drift off its surface by ulps per step. For spinning marbles, friction, rolling
 /// resistance and spin damping then act on those touches (module docs, "Rolling").
 #[inline]
-fn settle(touches: &TouchList, s: &mut State, a: Vec3, sep: f32) -> Motion {
+fn settle<const SPINS: bool>(touches: &TouchList, s: &mut State, a: Vec3, sep: f32) -> Motion {
     let mut a = a;
     let list = touches.as_slice();
     for tc in list {
@@ -462,7 +491,9 @@ fn settle(touches: &TouchList, s: &mut State, a: Vec3, sep: f32) -> Motion {
                 let an = a.dot(tc.normal);
                 if an < 0.0 {
                     a -= an * tc.normal;
-                    normal_force[i] -= an;
+                    if SPINS {
+                        normal_force[i] -= an;
+                    }
                     changed = true;
                 }
             }
@@ -472,7 +503,7 @@ fn settle(touches: &TouchList, s: &mut State, a: Vec3, sep: f32) -> Motion {
         }
     }
     let mut motion = free(a);
-    if s.spins {
+    if SPINS {
         for (i, tc) in list.iter().enumerate() {
             if normal_force[i] > 0.0 {
                 friction(s, tc, normal_force[i], &mut motion);

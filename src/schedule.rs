@@ -60,6 +60,7 @@ pub fn substep_schedule() -> Schedule {
         detect::detect_contacts.in_set(MarbleSystems::DetectContacts),
         (
             respond::respond,
+            respond::respond_spinning,
             boards::rotate_marbles.run_if(|c: Res<StepConfig>| c.rolling),
         )
             .chain()

@@ -8,10 +8,10 @@ use crate::components::{
     compensated_add,
 };
 use crate::config::StepConfig;
-use crate::narrow::{BoardCache, Material, TouchList, gather, touch_tolerance};
-use crate::response::{Found, MarbleIn, SubstepParams, resolve};
+use crate::narrow::{BoardCache, BoardSnapshot, Material, TouchList, gather, touch_tolerance};
+use crate::response::{Found, MarbleIn, MarbleOut, SubstepParams, resolve};
 
-/// Resolves every flagged marble through the substep's event loop
+/// Resolves every flagged marble that does not spin through the substep's event loop
 /// ([`crate::response`]): equation (1) for collisions, removal of approaching velocity for
 /// contacts, continuous collision, and position correction without added energy. Marbles
 /// detection did not flag keep their free motion.
@@ -20,11 +20,59 @@ pub fn respond(
     cache: Res<BoardCache>,
     mut marbles: Query<
         (
+            (&mut Position, &mut PositionCarry, &mut Velocity),
+            (
+                &StepStart,
+                &Acceleration,
+                &Radius,
+                &Restitution,
+                &mut Contacts,
+            ),
+        ),
+        (With<Marble>, Without<Quarantined>, Without<AngularVelocity>),
+    >,
+) {
+    let boards = cache.boards.as_slice();
+    let params = SubstepParams::from_config(&config, cache.h);
+    let mut touches = TouchList::default();
+    for ((mut position, mut carry, mut velocity), (start, acceleration, radius, e, mut contacts)) in
+        &mut marbles
+    {
+        if contacts.pending == Pending::None {
+            continue;
+        }
+        let marble = MarbleIn {
+            x0: start.position,
+            v0: start.velocity,
+            w0: None,
+            a: acceleration.0,
+            r: radius.0,
+            material: Material {
+                restitution: e.0,
+                ..Material::default()
+            },
+        };
+        let out = respond_one(boards, &params, &marble, &mut contacts, &mut touches);
+        (position.0, carry.0) =
+            compensated_add(config.compensated, start.position, start.carry, out.d);
+        velocity.0 = out.v;
+    }
+}
+
+/// [`respond`] for marbles that carry an [`AngularVelocity`]: with rolling on, they spin,
+/// with friction, rolling resistance and spin damping at their contacts; with it off they
+/// are smooth like the others. A scene without spinning marbles gives this system nothing
+/// to iterate.
+pub fn respond_spinning(
+    config: Res<StepConfig>,
+    cache: Res<BoardCache>,
+    mut marbles: Query<
+        (
             (
                 &mut Position,
                 &mut PositionCarry,
                 &mut Velocity,
-                Option<&mut AngularVelocity>,
+                &mut AngularVelocity,
             ),
             (&StepStart, &Acceleration, &Radius, &mut Contacts),
             (
@@ -38,14 +86,7 @@ pub fn respond(
     >,
 ) {
     let boards = cache.boards.as_slice();
-    let params = SubstepParams {
-        h: cache.h,
-        integrator: config.integrator,
-        ccd: config.ccd,
-        threshold: config.restitution_threshold,
-        tolerance: config.contact_tolerance,
-        max_impacts: config.max_impacts,
-    };
+    let params = SubstepParams::from_config(&config, cache.h);
     let mut touches = TouchList::default();
     for (
         (mut position, mut carry, mut velocity, mut spin),
@@ -59,11 +100,7 @@ pub fn respond(
         let marble = MarbleIn {
             x0: start.position,
             v0: start.velocity,
-            w0: if config.rolling {
-                spin.as_ref().map(|w| w.0)
-            } else {
-                None
-            },
+            w0: config.rolling.then_some(spin.0),
             a: acceleration.0,
             r: radius.0,
             material: Material {
@@ -73,42 +110,50 @@ pub fn respond(
                 spin_damping: spin_damping.map_or(0.0, |c| c.0),
             },
         };
-        let found = match contacts.pending {
-            Pending::Touching { complete } => {
-                // Detection recorded these touches; gather again only if it ran out of
-                // room to record them all.
-                if contacts.len() < crate::components::MAX_CONTACTS {
-                    touches.clear();
-                    for c in contacts.iter() {
-                        touches.push_recorded(c, boards, &marble.material);
-                    }
-                    touches.set_complete(complete);
-                } else {
-                    let tol = touch_tolerance(params.tolerance, marble.r, marble.x0);
-                    gather(
-                        boards,
-                        0.0,
-                        marble.x0,
-                        marble.r,
-                        tol,
-                        &marble.material,
-                        -marble.v0,
-                        &mut touches,
-                    );
-                }
-                Found::Touching(&touches)
-            }
-            Pending::Impact(tau) => Found::Impact(tau),
-            Pending::Overlap | Pending::None => Found::Overlap,
-        };
-        let out = resolve(boards, &params, &marble, found, &mut contacts);
+        let out = respond_one(boards, &params, &marble, &mut contacts, &mut touches);
         (position.0, carry.0) =
             compensated_add(config.compensated, start.position, start.carry, out.d);
         velocity.0 = out.v;
-        if marble.w0.is_some()
-            && let Some(w) = spin.as_mut()
-        {
-            w.0 = out.w;
+        if config.rolling {
+            spin.0 = out.w;
         }
     }
+}
+
+/// One flagged marble: the touches detection recorded (gathered again only if it ran out
+/// of room), then the event loop.
+fn respond_one(
+    boards: &[BoardSnapshot],
+    params: &SubstepParams,
+    marble: &MarbleIn,
+    contacts: &mut Contacts,
+    touches: &mut TouchList,
+) -> MarbleOut {
+    let found = match contacts.pending {
+        Pending::Touching { complete } => {
+            if contacts.len() < crate::components::MAX_CONTACTS {
+                touches.clear();
+                for c in contacts.iter() {
+                    touches.push_recorded(c, boards, &marble.material);
+                }
+                touches.set_complete(complete);
+            } else {
+                let tol = touch_tolerance(params.tolerance, marble.r, marble.x0);
+                gather(
+                    boards,
+                    0.0,
+                    marble.x0,
+                    marble.r,
+                    tol,
+                    &marble.material,
+                    -marble.v0,
+                    touches,
+                );
+            }
+            Found::Touching
+        }
+        Pending::Impact(tau) => Found::Impact(tau),
+        Pending::Overlap | Pending::None => Found::Overlap,
+    };
+    resolve(boards, params, marble, found, touches, contacts)
 }
