@@ -227,6 +227,11 @@ fn resolve_with<const SPINS: bool>(
             respond::<SPINS>(touches, &mut s, p.threshold, boards, 0.0, contacts);
             let motion = settle::<SPINS>(touches, &mut s, m.a, sep);
             s.v += offset(motion.a);
+            if SPINS {
+                // The spin gets the same offset, so that a marble rolling in the
+                // integrator's terms also rolls on the path.
+                s.w += offset(motion.alpha);
+            }
             motion
         }
         Found::Impact(tau) => {
@@ -308,7 +313,7 @@ fn resolve_with<const SPINS: bool>(
         return MarbleOut {
             d: s.d,
             v: s.v - offset(motion.a),
-            w: s.w,
+            w: s.w - offset(motion.alpha),
         };
     }
 
@@ -347,7 +352,7 @@ fn resolve_with<const SPINS: bool>(
     MarbleOut {
         d: s.d,
         v: s.v - offset(end.a),
-        w: s.w,
+        w: s.w - offset(end.alpha),
     }
 }
 
