@@ -82,6 +82,10 @@ pub enum PartShape {
     TriMesh(Box<TriMesh>),
     /// A height field centred on the part's origin.
     HeightField(Box<HeightField>),
+    /// A spherical bowl: the lower half (y ≤ 0) of the sphere of this radius about the
+    /// part's origin, as a surface (both faces collide). parry3d has no concave sphere, so
+    /// this one piece is the engine's own; its distance is exact.
+    Bowl(f32),
 }
 
 /// A shape with its pose in the board's frame.
@@ -117,6 +121,8 @@ pub enum Piece {
     Cuboid(Cuboid),
     /// One triangle (two-sided).
     Triangle(Triangle),
+    /// The lower half of a sphere of this radius (two-sided, concave from inside).
+    Bowl(f32),
 }
 
 /// Where a point is relative to a piece, in the board frame.
@@ -147,6 +153,9 @@ impl BoardGeometry {
                     PartShape::Cuboid(c) => Some(Aabb::new(-c.half_extents, c.half_extents)),
                     PartShape::TriMesh(m) => Some(m.local_aabb()),
                     PartShape::HeightField(h) => Some(*h.root_aabb()),
+                    PartShape::Bowl(r) => {
+                        Some(Aabb::new(Vec3::new(-r, -r, -r), Vec3::new(*r, 0.0, *r)))
+                    }
                 };
                 Part {
                     translation,
@@ -209,6 +218,7 @@ impl BoardGeometry {
                         f(i, id, &Piece::Triangle(m.triangle(id)));
                     }
                 }
+                PartShape::Bowl(r) => f(i, 0, &Piece::Bowl(*r)),
                 PartShape::HeightField(h) => {
                     h.map_elements_in_local_aabb(&q, &mut |id, tri| {
                         f(i, id, &Piece::Triangle(*tri))
@@ -226,6 +236,7 @@ impl BoardGeometry {
             | PartShape::Cuboid(_)
             | PartShape::TriMesh(_)
             | PartShape::HeightField(_) => true,
+            PartShape::Bowl(_) => false,
         }
     }
 
@@ -235,6 +246,7 @@ impl BoardGeometry {
             PartShape::HalfSpace(_) => Piece::HalfSpace,
             PartShape::Cuboid(c) => Piece::Cuboid(*c),
             PartShape::TriMesh(m) => Piece::Triangle(m.triangle(sub)),
+            PartShape::Bowl(r) => Piece::Bowl(*r),
             PartShape::HeightField(h) => Piece::Triangle(
                 h.triangle_at_id(sub)
                     .expect("piece ids come from this height field"),
@@ -272,7 +284,7 @@ impl Piece {
     /// Whether the piece is convex.
     #[inline]
     pub fn is_convex(&self) -> bool {
-        true
+        !matches!(self, Piece::Bowl(_))
     }
 
     /// Signed distance, closest point and normal of the piece-frame point `q`.
@@ -320,6 +332,7 @@ impl Piece {
                     }
                 }
             }
+            Piece::Bowl(radius) => bowl_proximity(*radius, q, hint),
             Piece::Triangle(t) => {
                 let proj = t.project_local_point(q, false);
                 let d = q - proj.point;
@@ -356,6 +369,45 @@ impl Piece {
                 }
             }
         }
+    }
+}
+
+/// Distance from `q` to the lower half (y ≤ 0) of the sphere of radius `radius` about the
+/// origin: to the sphere itself below the equator, to its rim circle above it.
+fn bowl_proximity(radius: f32, q: Vec3, hint: Vec3) -> Proximity {
+    let len = q.length();
+    let closest = if q.y <= 0.0 {
+        if len <= f32::MIN_POSITIVE * 1e6 {
+            // The centre: every point of the bowl is `radius` away; take the bottom.
+            return Proximity {
+                distance: radius,
+                point: Vec3::new(0.0, -radius, 0.0),
+                normal: Vec3::Y,
+            };
+        }
+        q * (radius / len)
+    } else {
+        let flat = Vec3::new(q.x, 0.0, q.z);
+        let f = flat.length();
+        if f > 0.0 {
+            flat * (radius / f)
+        } else {
+            Vec3::new(radius, 0.0, 0.0)
+        }
+    };
+    let d = q - closest;
+    let distance = d.length();
+    let normal = if distance > f32::MIN_POSITIVE * 1e6 {
+        d / distance
+    } else {
+        // On the surface: the sphere's normal, oriented by the hint.
+        let n = closest / radius;
+        if n.dot(hint) < 0.0 { -n } else { n }
+    };
+    Proximity {
+        distance,
+        point: closest,
+        normal,
     }
 }
 

@@ -349,6 +349,24 @@ fn resolve_with<const SPINS: bool>(
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
     let end = settle::<SPINS>(touches, &mut s, m.a, sep);
+    if settled_start
+        && t >= p.h
+        && matches!(p.integrator, Integrator::VelocityVerlet | Integrator::Rk4)
+    {
+        // On a curved surface the constrained acceleration depends on where the marble
+        // is (a marble in a bowl is a pendulum). The path above held the start's value;
+        // velocity Verlet takes the mean of the start's and the end's, which keeps the
+        // oscillation's energy bounded instead of growing. (On flat surfaces the two are
+        // equal and nothing changes.) The correction stays in the surface.
+        let mut dv = 0.5 * p.h * (end.a - motion.a);
+        for tc in touches.as_slice() {
+            dv -= dv.dot(tc.normal) * tc.normal;
+        }
+        s.v += dv;
+        if SPINS {
+            s.w += 0.5 * p.h * (end.alpha - motion.alpha);
+        }
+    }
     MarbleOut {
         d: s.d,
         v: s.v - offset(end.a),

@@ -230,6 +230,12 @@ pub enum ShapeDesc {
     },
     /// Parts posed in the board's frame; parts are not compounds.
     Compound(Vec<PartDesc>),
+    /// A spherical bowl: the lower half (y ≤ 0) of a sphere of this radius about the
+    /// board's origin, a surface (both faces collide). An extension of the contract.
+    Bowl {
+        /// m, > 0.
+        radius: f32,
+    },
 }
 
 /// A part of a compound board.
@@ -488,6 +494,7 @@ impl ShapeDesc {
                     Vec3::from_array(*scale),
                 )))
             }
+            ShapeDesc::Bowl { radius } => PartShape::Bowl(*radius),
             ShapeDesc::Compound(_) => unreachable!("validation refuses nested compounds"),
         }
     }
@@ -501,6 +508,7 @@ pub fn quat(q: [f32; 4]) -> Quat {
 fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Result<(), SceneError> {
     match shape {
         ShapeDesc::Plane(_) => Ok(()),
+        ShapeDesc::Bowl { radius } => positive(&format!("{field}.Bowl.radius"), *radius),
         ShapeDesc::Cuboid { half_extents } => {
             for (k, h) in ["x", "y", "z"].iter().zip(half_extents) {
                 positive(&format!("{field}.Cuboid.half_extents.{k}"), *h)?;

@@ -285,3 +285,59 @@ fn rolls_with_semi_implicit_euler() {
         assert!(slip(*v, *w, n).length() <= 1e-4, "step {i}: slipping");
     }
 }
+
+/// Times between successive upward zero crossings of x (linearly interpolated).
+fn periods(traj: &[(Vec3, Vec3, Vec3)], dt: f32) -> Vec<f32> {
+    let mut crossings = Vec::new();
+    for (i, w) in traj.windows(2).enumerate() {
+        let (a, b) = (w[0].0.x, w[1].0.x);
+        if a < 0.0 && b >= 0.0 {
+            crossings.push((i as f32 + a / (a - b)) * dt);
+        }
+    }
+    crossings.windows(2).map(|c| c[1] - c[0]).collect()
+}
+
+/// A marble rolling in a spherical bowl of radius R = 0.5 m, released 0.05 rad from the
+/// bottom: small oscillations of period `2π √(7 (R − r) / (5 g))` (within 1%), and without
+/// rolling (smooth) `2π √((R − r) / g)`.
+#[test]
+fn bowl_oscillation_period() {
+    let big_r = 0.5f32;
+    let rho = big_r - R;
+    let theta0 = 0.05f32;
+    let start = Vec3::new(rho * theta0.sin(), -rho * theta0.cos(), 0.0);
+    let dt = 1.0 / 240.0;
+    for rolling in [true, false] {
+        let mut scene = rolling_scene(
+            dt,
+            vec![BoardDesc::new(ShapeDesc::Bowl { radius: big_r })],
+            vec![marble(start, Vec3::ZERO, Vec3::ZERO, 0.5)],
+        );
+        scene.rolling = rolling;
+        let traj = run(&scene, 240 * 8);
+        let p = periods(&traj, dt);
+        assert!(p.len() >= 3, "rolling={rolling}: {} periods", p.len());
+        let mean = p.iter().sum::<f32>() / p.len() as f32;
+        let factor = if rolling { 7.0 / 5.0 } else { 1.0 };
+        let exact = 2.0 * std::f32::consts::PI * (factor * rho / G).sqrt();
+        println!("rolling={rolling}: period {mean}, exact {exact}");
+        assert!(
+            ((mean - exact) / exact).abs() <= 0.01,
+            "rolling={rolling}: period {mean}, exact {exact} ({p:?})"
+        );
+        // It stays on the bowl and its amplitude does not grow.
+        for (i, (x, _, _)) in traj.iter().enumerate() {
+            assert!(
+                (x.length() - rho).abs() <= 2e-5,
+                "step {i}: off the bowl at {x}"
+            );
+            assert!(
+                x.x.abs() <= rho * theta0.sin() * 1.001,
+                "step {i}: amplitude grew to {} from {}",
+                x.x,
+                rho * theta0.sin()
+            );
+        }
+    }
+}
