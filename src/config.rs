@@ -1,7 +1,7 @@
 //! The one resource holding every tunable of the step, and the integrators.
 
 use bevy_ecs::prelude::*;
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// Time integration of a marble's free motion over one substep.
@@ -254,6 +254,40 @@ impl StepConfig {
     #[inline]
     pub fn substep_dt(&self) -> f32 {
         self.dt / self.substeps.max(1) as f32
+    }
+}
+
+/// The cheap model of a tilting board, after Neverball: the board stays where it is and
+/// gravity turns the other way instead. Present as a resource only when a scene asks for it
+/// (`tilt_as_gravity: true`); then the turning boards are simulated still, in their own
+/// frame, and [`GravityTilt::to_world`] maps results back.
+///
+/// What it leaves out is everything the board's turning does besides tilting gravity: the
+/// surface's own velocity `ω × r` at the contact (a turning board pushes marbles), and the
+/// centrifugal, Coriolis and Euler forces of the turning frame. `marble tradeoff` measures
+/// how far that drifts from the true moving board as the tilt rate grows.
+#[derive(Resource, Clone, Copy, Debug, PartialEq)]
+pub struct GravityTilt {
+    /// The board's angular velocity, rad/s, world frame.
+    pub angular_velocity: Vec3,
+    /// The point it turns about (the board's position), m.
+    pub pivot: Vec3,
+    /// How far the board has turned since the start.
+    pub rotation: Quat,
+}
+
+impl GravityTilt {
+    /// Gravity as the still board sees it: the world's gravity turned back by the tilt.
+    #[inline]
+    pub fn gravity(&self, world_gravity: Vec3) -> Vec3 {
+        self.rotation.conjugate() * world_gravity
+    }
+
+    /// A board-frame position and velocity in the world.
+    pub fn to_world(&self, x: Vec3, v: Vec3) -> (Vec3, Vec3) {
+        let xw = self.pivot + self.rotation * (x - self.pivot);
+        let vw = self.rotation * v + self.angular_velocity.cross(xw - self.pivot);
+        (xw, vw)
     }
 }
 

@@ -33,7 +33,7 @@ pub mod prelude {
         AngularVelocity, Board, Collider, Contact, ContactKind, Contacts, Force, Friction, Marble,
         Mass, Position, Quarantined, Radius, Restitution, Rotation, Velocity,
     };
-    pub use crate::config::{Integrator, Preset, StepConfig};
+    pub use crate::config::{GravityTilt, Integrator, Preset, StepConfig};
     pub use crate::geometry::{BoardGeometry, PartShape};
     #[cfg(feature = "bevy")]
     pub use crate::plugin::MarblePhysicsPlugin;

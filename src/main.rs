@@ -131,10 +131,11 @@ fn tradeoff(out: Option<PathBuf>, quick: bool) -> Result<(), Failure> {
     let rows = study::run(&settings, length, |done| bar.set_position(done as u64));
     bar.finish_and_clear();
     let report = format!(
-        "## Every setting\n\n{}\n## Presets\n\n{}\n## Compensated summation\n\n{}\n{}",
+        "## Every setting\n\n{}\n## Presets\n\n{}\n## Compensated summation\n\n{}\n## Tilting board: moving board or tilted gravity\n\n{}\n{}",
         study::markdown(&rows),
         study::presets_markdown(length),
         study::compensation_markdown(length),
+        study::tilt_markdown(length),
         study::front_markdown(&rows),
     );
     print!("{report}");

@@ -86,6 +86,18 @@ impl BoardSnapshot {
         }
     }
 
+    /// Normal component (along `n`) of the acceleration of the board's material point at
+    /// world point `p`, time `t`: the centripetal `ω × (ω × (p − c))` of its turning.
+    #[inline]
+    pub fn surface_accel(&self, t: f32, p: Vec3, n: Vec3) -> f32 {
+        if self.angular_velocity == Vec3::ZERO {
+            return 0.0;
+        }
+        let w = self.angular_velocity;
+        w.cross(w.cross(p - (self.position + self.velocity * t)))
+            .dot(n)
+    }
+
     /// Velocity of the board's material point at world point `p`, time `t`.
     #[inline]
     pub fn point_velocity(&self, t: f32, p: Vec3) -> Vec3 {
@@ -118,6 +130,12 @@ pub struct Touch {
     pub gap: f32,
     /// Board material velocity at `point`.
     pub board_velocity: Vec3,
+    /// Normal acceleration the marble needs to stay on a turning board's surface:
+    /// `(ω × (ω × (p − c)))·n` of the surface point (zero for boards that do not turn).
+    /// The term `−(v − v_b)·(ω × n)` of the turning normal is added where `v` is known.
+    pub surface_accel: f32,
+    /// The board's angular velocity (zero when it does not turn).
+    pub board_spin: Vec3,
     /// Combined material of the pair (averages of the two parties' coefficients).
     pub material: Material,
     /// Whether the piece is convex (it then lies behind its tangent plane at the contact).
@@ -171,6 +189,8 @@ impl Default for TouchList {
                 normal: Vec3::Y,
                 gap: 0.0,
                 board_velocity: Vec3::ZERO,
+                surface_accel: 0.0,
+                board_spin: Vec3::ZERO,
                 material: Material::default(),
                 convex: true,
             }; MAX_TOUCHES],
@@ -237,6 +257,8 @@ impl TouchList {
             normal: c.normal,
             gap: -c.depth,
             board_velocity: b.point_velocity(0.0, c.point),
+            surface_accel: b.surface_accel(0.0, c.point, c.normal),
+            board_spin: b.angular_velocity,
             material: marble.combine(b),
             convex: b.geometry.part_is_convex(c.piece.part()),
         };
@@ -339,6 +361,8 @@ pub fn gather(
                         normal: q * p.normal,
                         gap,
                         board_velocity: b.point_velocity(t, point),
+                        surface_accel: b.surface_accel(t, point, q * p.normal),
+                        board_spin: b.angular_velocity,
                         material: material.combine(b),
                         convex: piece.is_convex(),
                     },

@@ -58,7 +58,7 @@ impl Drop for AtomicFile {
 pub fn write_csv_rows(w: &mut impl Write, sim: &Simulation, step: u64, dt: f32) -> io::Result<()> {
     let time = (step as f64 * dt as f64) as f32;
     for i in 0..sim.marbles().len() {
-        let (x, v) = sim.marble_state(i);
+        let (x, v) = sim.marble_world_state(i);
         let s = sim.marble_spin(i);
         writeln!(
             w,
@@ -98,7 +98,7 @@ impl HeightTrace {
             return;
         }
         for (i, s) in self.series.iter_mut().enumerate() {
-            s.push((time, sim.marble_state(i).0.y));
+            s.push((time, sim.marble_world_state(i).0.y));
         }
     }
 

@@ -510,8 +510,13 @@ fn settle<const SPINS: bool>(touches: &TouchList, s: &mut State, a: Vec3, sep: f
     for _ in 0..4 {
         let mut changed = false;
         for (i, tc) in list.iter().enumerate() {
-            if (s.v - tc.board_velocity).dot(tc.normal) <= sep {
-                let an = a.dot(tc.normal);
+            let rel = s.v - tc.board_velocity;
+            if rel.dot(tc.normal) <= sep {
+                // Staying on the surface takes the surface's own normal acceleration: on a
+                // turning board the centripetal part and the turning of the normal,
+                // d/dt((v − v_b)·n) = (a − a_b)·n + (v − v_b)·(ω × n) ≥ 0.
+                let need = tc.surface_accel - rel.dot(tc.board_spin.cross(tc.normal));
+                let an = a.dot(tc.normal) - need;
                 if an < 0.0 {
                     a -= an * tc.normal;
                     if SPINS {

@@ -70,6 +70,12 @@ pub struct Scene {
     pub rolling: bool,
     /// Marble–marble collisions (not yet supported).
     pub marble_collisions: bool,
+    /// Model the turning board by turning gravity instead (Neverball's way): the board
+    /// stays still, gravity tilts back. Cheaper and approximate; see
+    /// [`GravityTilt`](crate::config::GravityTilt). Every turning board must share one
+    /// angular velocity and position. An extension of the contract.
+    #[serde(skip_serializing_if = "is_false")]
+    pub tilt_as_gravity: bool,
     /// Collision-versus-contact threshold, m/s, ≥ 0.
     pub restitution_threshold: f32,
     /// Seconds `marble run` simulates without `--steps`, ≥ 0.
@@ -92,6 +98,7 @@ impl Default for Scene {
             ccd: c.ccd,
             rolling: false,
             marble_collisions: false,
+            tilt_as_gravity: false,
             restitution_threshold: c.restitution_threshold,
             duration: 10.0,
             boards: Vec::new(),
@@ -252,6 +259,10 @@ pub struct PartDesc {
     pub rotation: [f32; 4],
 }
 
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
 fn identity_rotation() -> [f32; 4] {
     [0.0, 0.0, 0.0, 1.0]
 }
@@ -362,6 +373,25 @@ impl Scene {
             non_negative(&f("friction"), b.friction)?;
             non_negative(&f("rolling_resistance"), b.rolling_resistance)?;
             non_negative(&f("spin_damping"), b.spin_damping)?;
+        }
+        if self.tilt_as_gravity {
+            let mut turning = self
+                .boards
+                .iter()
+                .enumerate()
+                .filter(|(_, b)| b.angular_velocity != [0.0; 3]);
+            if let Some((_, first)) = turning.next()
+                && let Some((i, other)) = turning.find(|(_, b)| {
+                    b.angular_velocity != first.angular_velocity || b.position != first.position
+                })
+            {
+                return invalid(
+                    &format!("boards[{i}].angular_velocity"),
+                    "the same angular velocity and position as the first turning board when \
+                     tilt_as_gravity is on",
+                    format!("{:?} about {:?}", other.angular_velocity, other.position),
+                );
+            }
         }
         for (i, m) in self.marbles.iter().enumerate() {
             let f = |name: &str| format!("marbles[{i}].{name}");

@@ -65,7 +65,12 @@ pub fn substep_schedule() -> Schedule {
         )
             .chain()
             .in_set(MarbleSystems::Respond),
-        boards::move_boards.in_set(MarbleSystems::MoveBoards),
+        (
+            boards::move_boards,
+            boards::advance_tilt.run_if(resource_exists::<crate::config::GravityTilt>),
+        )
+            .chain()
+            .in_set(MarbleSystems::MoveBoards),
         (forces::clear_forces, forces::quarantine_non_finite)
             .chain()
             .in_set(MarbleSystems::Finish)

@@ -1,12 +1,13 @@
 //! Headless stepping: a scene's world and the physics schedule, without `bevy_app`.
 
 use bevy_ecs::prelude::*;
-use glam::Vec3;
+use glam::{Quat, Vec3};
 
 use crate::components::{
     AngularVelocity, Board, Collider, Friction, Marble, Mass, Position, Quarantined, Radius,
     Restitution, RollingResistance, Rotation, SpinDamping, Velocity,
 };
+use crate::config::GravityTilt;
 use crate::scene::{Scene, SceneError, quat};
 use crate::schedule::{init_resources, run_step, substep_schedule};
 
@@ -44,6 +45,19 @@ impl Simulation {
         let mut world = World::new();
         world.insert_resource(scene.step_config());
         init_resources(&mut world);
+        // Neverball's model: the turning board stands still and gravity turns instead.
+        let tilt = scene
+            .boards
+            .iter()
+            .find(|b| scene.tilt_as_gravity && b.angular_velocity != [0.0; 3])
+            .map(|b| GravityTilt {
+                angular_velocity: Vec3::from_array(b.angular_velocity),
+                pivot: Vec3::from_array(b.position),
+                rotation: Quat::IDENTITY,
+            });
+        if let Some(tilt) = tilt {
+            world.insert_resource(tilt);
+        }
         let boards = scene
             .boards
             .iter()
@@ -55,7 +69,11 @@ impl Simulation {
                         Position(Vec3::from_array(b.position)),
                         Rotation(quat(b.rotation)),
                         Velocity(Vec3::from_array(b.velocity)),
-                        AngularVelocity(Vec3::from_array(b.angular_velocity)),
+                        AngularVelocity(if tilt.is_some() {
+                            Vec3::ZERO
+                        } else {
+                            Vec3::from_array(b.angular_velocity)
+                        }),
                         Restitution(b.restitution),
                         Friction(b.friction),
                         RollingResistance(b.rolling_resistance),
@@ -151,7 +169,19 @@ impl Simulation {
             .map_or(Vec3::ZERO, |w| w.0)
     }
 
-    /// Position and velocity of the scene's marble `index`.
+    /// Position and velocity of the scene's marble `index` in the world: the same as
+    /// [`Self::marble_state`] unless the scene models its tilting board by tilting gravity,
+    /// whose board-frame results this maps back to the world.
+    pub fn marble_world_state(&self, index: usize) -> (Vec3, Vec3) {
+        let (x, v) = self.marble_state(index);
+        match self.world.get_resource::<GravityTilt>() {
+            Some(tilt) => tilt.to_world(x, v),
+            None => (x, v),
+        }
+    }
+
+    /// Position and velocity of the scene's marble `index` (in the still board's frame when
+    /// the scene tilts gravity instead of its board).
     pub fn marble_state(&self, index: usize) -> (Vec3, Vec3) {
         let e = self.marbles[index];
         (

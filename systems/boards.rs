@@ -113,3 +113,11 @@ pub fn rotate_marbles(
         }
     }
 }
+
+/// Advances the [`GravityTilt`](crate::config::GravityTilt) of a scene that models its
+/// turning board by turning gravity (runs only when there is one).
+pub fn advance_tilt(cache: Res<BoardCache>, mut tilt: ResMut<crate::config::GravityTilt>) {
+    let h = cache.h;
+    let tilt = tilt.as_mut();
+    tilt.rotation = (Quat::from_scaled_axis(tilt.angular_velocity * h) * tilt.rotation).normalize();
+}

@@ -3,14 +3,16 @@
 use bevy_ecs::prelude::*;
 
 use crate::components::{Acceleration, Force, Marble, Mass, Position, Quarantined, Velocity};
-use crate::config::{StepConfig, SubstepCounter};
+use crate::config::{GravityTilt, StepConfig, SubstepCounter};
 
-/// Acceleration of every marble for this substep: `gravity + Force / mass`.
+/// Acceleration of every marble for this substep: `gravity + Force / mass` (gravity turned
+/// back by the tilt when a [`GravityTilt`] stands in for a turning board).
 pub fn accumulate_forces(
     config: Res<StepConfig>,
+    tilt: Option<Res<GravityTilt>>,
     mut marbles: Query<(&Force, &Mass, &mut Acceleration), (With<Marble>, Without<Quarantined>)>,
 ) {
-    let g = config.gravity;
+    let g = tilt.map_or(config.gravity, |t| t.gravity(config.gravity));
     for (force, mass, mut acceleration) in &mut marbles {
         acceleration.0 = g + force.0 * mass.inverse();
     }

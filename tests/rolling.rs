@@ -341,3 +341,54 @@ fn bowl_oscillation_period() {
         }
     }
 }
+
+/// Neverball's model (`tilt_as_gravity: true`): the board stays still and gravity tilts
+/// back. For a slow tilt (0.03 rad/s to 0.1 rad) the marble ends within 3% of where the
+/// true moving board rolls it (relative to the distance rolled); the board itself never
+/// moves; results map back to the world.
+#[test]
+fn tilting_gravity_approximates_a_slowly_tilting_board() {
+    let run = |cheap: bool| {
+        let mut board = BoardDesc::new(ShapeDesc::Cuboid {
+            half_extents: [10.0, 0.05, 10.0],
+        });
+        board.position = [0.0, -0.05, 0.0];
+        board.angular_velocity = [0.0, 0.0, 0.03];
+        let mut scene = rolling_scene(
+            1.0 / 120.0,
+            vec![board],
+            vec![marble(Vec3::new(0.3, R, 0.0), Vec3::ZERO, Vec3::ZERO, 0.5)],
+        );
+        scene.tilt_as_gravity = cheap;
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        for _ in 0..400 {
+            sim.step();
+        }
+        let b = sim.boards()[0];
+        let board_turned = sim.world().get::<Rotation>(b).unwrap().0 != Quat::IDENTITY;
+        (sim.marble_world_state(0).0, board_turned)
+    };
+    let (truth, turned) = run(false);
+    let (cheap, still) = run(true);
+    assert!(turned && !still);
+    let rolled = (truth - Vec3::new(0.3, R, 0.0)).length();
+    assert!(rolled > 0.5, "rolled {rolled}");
+    assert!(
+        (cheap - truth).length() <= 0.03 * rolled,
+        "{cheap} against {truth}"
+    );
+}
+
+/// `tilt_as_gravity` needs one shared turn: two boards turning differently are refused.
+#[test]
+fn tilting_gravity_refuses_two_different_turns() {
+    let err = Scene::from_ron_str(
+        "(tilt_as_gravity: true, boards: [(shape: Plane(()), angular_velocity: (0.0, 0.0, 0.1)), (shape: Plane(()), angular_velocity: (0.1, 0.0, 0.0))])",
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string()
+            .starts_with("boards[1].angular_velocity must be"),
+        "{err}"
+    );
+}
