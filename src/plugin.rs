@@ -87,13 +87,20 @@ pub fn physics_step(world: &mut World) {
     run_step(world, |world| world.run_schedule(MarbleSubstep));
 }
 
-/// Writes marble positions and board poses into their `Transform`s.
+/// Writes marble positions (and orientations, for marbles that roll) and board poses into
+/// their `Transform`s.
 pub fn sync_transforms(
-    mut marbles: Query<(&Position, &mut Transform), (With<Marble>, Without<Board>)>,
+    mut marbles: Query<
+        (&Position, Option<&Rotation>, &mut Transform),
+        (With<Marble>, Without<Board>),
+    >,
     mut boards: Query<(&Position, &Rotation, &mut Transform), (With<Board>, Without<Marble>)>,
 ) {
-    for (position, mut transform) in &mut marbles {
+    for (position, rotation, mut transform) in &mut marbles {
         transform.translation = position.0;
+        if let Some(rotation) = rotation {
+            transform.rotation = rotation.0;
+        }
     }
     for (position, rotation, mut transform) in &mut boards {
         transform.translation = position.0;

@@ -140,4 +140,56 @@ mod plugin {
         let bz = world.get::<Transform>(board).unwrap().translation.z;
         assert!((bz - 1.0).abs() <= 1e-4, "board z = {bz}");
     }
+
+    /// Rolling in a Bevy app: `StepConfig::rolling` on and a marble spawned with an
+    /// `AngularVelocity` rolls down a 20° incline at `(5/7) g sinθ` and its `Rotation` turns.
+    #[test]
+    fn plugin_rolls_marbles() {
+        let mut app = App::new();
+        app.add_plugins(MarblePhysicsPlugin::default());
+        app.insert_resource(Time::<Fixed>::from_duration(Duration::from_secs_f64(
+            1.0 / 120.0,
+        )));
+        {
+            let mut config = app.world_mut().resource_mut::<StepConfig>();
+            config.rolling = true;
+            Preset::Balanced.apply(&mut config);
+        }
+        let theta = 20f32.to_radians();
+        let tilt = glam::Quat::from_rotation_z(theta);
+        let start = tilt * Vec3::Y * 0.008;
+        app.world_mut().spawn((
+            Board,
+            Collider::new(BoardGeometry::single(PartShape::HalfSpace(
+                parry3d::shape::HalfSpace::new(Vec3::Y),
+            ))),
+            Rotation(tilt),
+        ));
+        let marble = app
+            .world_mut()
+            .spawn((
+                Marble,
+                Position(start),
+                AngularVelocity::default(),
+                Rotation::default(),
+                Transform::default(),
+            ))
+            .id();
+        app.finish();
+        for _ in 0..120 {
+            app.world_mut().run_schedule(FixedPostUpdate);
+        }
+        let world = app.world();
+        let x = world.get::<Position>(marble).unwrap().0;
+        let s = (x - start).dot(tilt * -Vec3::X);
+        let exact = 0.5 * (5.0 / 7.0) * 9.81 * theta.sin();
+        assert!(
+            ((s - exact) / exact).abs() <= 1e-3,
+            "s = {s}, exact {exact}"
+        );
+        assert_ne!(
+            world.get::<Rotation>(marble).unwrap().0,
+            glam::Quat::IDENTITY
+        );
+    }
 }
