@@ -477,8 +477,19 @@ pub fn earliest_impact(
             if gap <= tol {
                 return; // touching already: a contact, not an impact
             }
+            // With |ḋ| ≤ L, the gap cannot fall to `tol` inside [τ, end] and climb back to
+            // its value at the end unless (d(τ) − tol) + (d(end) − tol) ≤ L (end − τ): where
+            // that fails, no impact is possible in the rest of the span.
+            // (Evaluated from the second step on: most pieces are done in one.)
+            let mut gap_end = None;
             let mut tau = 0.0;
-            for _ in 0..MAX_ADVANCE_ITERATIONS {
+            for i in 0..MAX_ADVANCE_ITERATIONS {
+                if i > 0 {
+                    let end = *gap_end.get_or_insert_with(|| gap_at(limit));
+                    if end > tol && (gap - tol) + (end - tol) > speed * (limit - tau) {
+                        return;
+                    }
+                }
                 tau += (gap - 0.5 * tol) / speed;
                 if tau >= limit {
                     return;
