@@ -22,7 +22,9 @@
 //! lies before `τ + (d − tol/2)/L`, so stepping by that amount never passes an impact; the
 //! bound `L` is the marble's speed bound along its path plus the board's speed at the
 //! farthest point the marble can reach. A head-on approach converges in one or two
-//! iterations; grazing approaches converge geometrically. Because each step is safe, a
+//! iterations; grazing approaches converge geometrically. For a moving board the bound is
+//! the marble's speed relative to the board's material point under it, which stays small
+//! for marbles riding a turning board. Because each step is safe, a
 //! marble at any speed never passes through a board, however thin.
 
 use std::sync::Arc;
@@ -436,7 +438,8 @@ pub fn earliest_impact(
         // Everything the marble can reach this substep, in the board's frame; a moving
         // board sees it through both end poses and, if it turns, a margin for the turn.
         let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());
-        // Speed bound of the marble relative to the board's frame.
+        // Speed bound of the marble relative to the board's frame (a still board: the
+        // marble's own speed bound).
         let mut speed = marble_speed;
         if moving {
             let (c1, q1) = b.pose_at(path.t0 + span);
@@ -449,7 +452,19 @@ pub fn earliest_impact(
                 query.mins - Vec3::splat(turn),
                 query.maxs + Vec3::splat(turn),
             );
-            speed += b.velocity.length() + w * far;
+            // The distance to a piece changes no faster than the marble's position in the
+            // board's frame, y = Rᵀ(x − c), whose rate is the marble's velocity relative to
+            // the board's material point under it:
+            //   ẏ = Rᵀ(u0 + τ (a − ω × (v − v_b)) − ½ τ² ω × a),
+            //   u0 = v − v_b − ω × (x − c) at the path's start.
+            // A marble riding a turning board has u0 ≈ 0, so the bound stays tight where
+            // the board's own speed would make conservative advancement crawl.
+            let wv = b.angular_velocity;
+            let rel = path.v - b.velocity;
+            let u0 = rel - wv.cross(path.x - c0);
+            speed = u0.length()
+                + span * (path.a - wv.cross(rel)).length()
+                + 0.5 * span * span * w * path.a.length();
         }
         if speed <= 0.0 {
             continue;
