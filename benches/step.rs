@@ -19,28 +19,41 @@ use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_m
 
 const STEPS_PER_BUILD: u64 = 60;
 
+/// Benchmarks one step of `scene` under `id`, rebuilding the simulation outside the timing
+/// every [`STEPS_PER_BUILD`] steps.
+fn bench_scene(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    id: BenchmarkId,
+    scene: &Scene,
+) {
+    let fresh = || Simulation::from_scene(scene).expect("bench scene is valid");
+    let mut sim = fresh();
+    group.throughput(Throughput::Elements(scene.marbles.len() as u64));
+    group.bench_function(id, |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                if sim.steps() >= STEPS_PER_BUILD {
+                    sim = fresh();
+                }
+                let start = Instant::now();
+                sim.step();
+                total += start.elapsed();
+            }
+            total
+        })
+    });
+}
+
 fn walled_board(c: &mut Criterion) {
     let mut group = c.benchmark_group("walled_board");
     for n in [1_000usize, 10_000, 100_000] {
-        let scene = scenes::walled_board(n);
-        let fresh = || Simulation::from_scene(&scene).expect("bench scene is valid");
-        let mut sim = fresh();
-        group.throughput(Throughput::Elements(n as u64));
         group.sample_size(if n >= 100_000 { 10 } else { 20 });
-        group.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
-            b.iter_custom(|iters| {
-                let mut total = Duration::ZERO;
-                for _ in 0..iters {
-                    if sim.steps() >= STEPS_PER_BUILD {
-                        sim = fresh();
-                    }
-                    let start = Instant::now();
-                    sim.step();
-                    total += start.elapsed();
-                }
-                total
-            })
-        });
+        bench_scene(
+            &mut group,
+            BenchmarkId::from_parameter(n),
+            &scenes::walled_board(n),
+        );
     }
     group.finish();
 }
@@ -49,29 +62,12 @@ fn walled_board(c: &mut Criterion) {
 /// no rolling system run) and on (spin, friction and rolling, `rolling: true`).
 fn rolling(c: &mut Criterion) {
     let mut group = c.benchmark_group("rolling");
-    let n = 10_000;
+    group.sample_size(20);
     for on in [false, true] {
-        let mut scene = scenes::walled_board(n);
+        let mut scene = scenes::walled_board(10_000);
         scene.rolling = on;
-        let fresh = || Simulation::from_scene(&scene).expect("bench scene is valid");
-        let mut sim = fresh();
-        group.throughput(Throughput::Elements(n as u64));
-        group.sample_size(20);
         let name = if on { "on" } else { "off" };
-        group.bench_with_input(BenchmarkId::from_parameter(name), &n, |b, _| {
-            b.iter_custom(|iters| {
-                let mut total = Duration::ZERO;
-                for _ in 0..iters {
-                    if sim.steps() >= STEPS_PER_BUILD {
-                        sim = fresh();
-                    }
-                    let start = Instant::now();
-                    sim.step();
-                    total += start.elapsed();
-                }
-                total
-            })
-        });
+        bench_scene(&mut group, BenchmarkId::from_parameter(name), &scene);
     }
     group.finish();
 }

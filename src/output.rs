@@ -139,10 +139,15 @@ impl HeightTrace {
             };
             draw().map_err(|e| io::Error::other(e.to_string()))?;
         }
-        let mut f = AtomicFile::create(path)?;
-        f.writer().write_all(svg.as_bytes())?;
-        f.commit()
+        write_atomically(path, svg.as_bytes())
     }
+}
+
+/// Writes `bytes` to `path` through an [`AtomicFile`].
+fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    let mut f = AtomicFile::create(path)?;
+    f.writer().write_all(bytes)?;
+    f.commit()
 }
 
 /// Writes the error-versus-cost plot of one reference scene of the study (log–log, one
@@ -236,7 +241,5 @@ pub fn write_tradeoff_svg(
         };
         draw().map_err(|e| io::Error::other(e.to_string()))?;
     }
-    let mut f = AtomicFile::create(path)?;
-    f.writer().write_all(svg.as_bytes())?;
-    f.commit()
+    write_atomically(path, svg.as_bytes())
 }

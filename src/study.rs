@@ -82,6 +82,16 @@ pub enum Length {
     Quick,
 }
 
+impl Length {
+    /// Marbles, steps per sample and samples of the cost measurements.
+    pub fn cost_sample(self) -> (usize, usize, usize) {
+        match self {
+            Length::Full => (1000, 8, 5),
+            Length::Quick => (200, 3, 3),
+        }
+    }
+}
+
 /// A reference scene with an exact answer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Reference {
@@ -360,12 +370,23 @@ fn thin_wall(s: &Setting) -> f32 {
 /// Cost of a setting: median over `repeats` runs of the time per marble-step (one `dt`,
 /// all substeps) of `marbles` marbles on the walled board (bench scene (a)), in ns.
 pub fn cost(setting: &Setting, marbles: usize, steps: usize, repeats: usize) -> f64 {
-    let mut sim = Simulation::from_scene(&setting.apply(scenes::walled_board(marbles)))
-        .expect("bench scene is valid");
-    sim.world_mut().resource_mut::<StepConfig>().compensated = setting.compensated;
+    scene_cost(
+        &setting.apply(scenes::walled_board(marbles)),
+        setting.compensated,
+        steps,
+        repeats,
+    )
+}
+
+/// Median over `repeats` runs of `steps` steps of the time per marble-step of `scene`, ns,
+/// after three steps of warm-up.
+pub fn scene_cost(scene: &Scene, compensated: bool, steps: usize, repeats: usize) -> f64 {
+    let mut sim = Simulation::from_scene(scene).expect("bench scene is valid");
+    sim.world_mut().resource_mut::<StepConfig>().compensated = compensated;
     for _ in 0..3 {
         sim.step();
     }
+    let marbles = sim.marbles().len().max(1);
     let mut samples: Vec<f64> = (0..repeats.max(1))
         .map(|_| {
             let start = Instant::now();
@@ -453,10 +474,7 @@ pub fn quick_grid() -> Vec<Setting> {
 /// Runs every setting of `settings` on every reference scene and measures its cost;
 /// `progress` is called after each setting.
 pub fn run(settings: &[Setting], length: Length, mut progress: impl FnMut(usize)) -> Vec<Row> {
-    let (marbles, steps, repeats) = match length {
-        Length::Full => (1000, 8, 5),
-        Length::Quick => (200, 3, 3),
-    };
+    let (marbles, steps, repeats) = length.cost_sample();
     settings
         .iter()
         .enumerate()
@@ -621,10 +639,7 @@ pub fn compensation_markdown(length: Length) -> String {
     let mut out = String::from(
         "| compensated | 0.1 s free fall at dt = 1e-6 s from y = 1 m | the same from y = 100 m | bounce 10 km out (worst of apexes 1–3) | ns/marble-step |\n| --- | --- | --- | --- | --- |\n",
     );
-    let (marbles, steps, repeats) = match length {
-        Length::Full => (1000, 8, 5),
-        Length::Quick => (200, 3, 3),
-    };
+    let (marbles, steps, repeats) = length.cost_sample();
     for compensated in [true, false] {
         let fall_error = |y0: f32| {
             let fall = Scene {
@@ -685,10 +700,7 @@ pub fn compensation_markdown(length: Length) -> String {
 /// marbles end, relative to the distance the true one rolled. Cost: 1,000 marbles on a
 /// walled board turning at 0.1 rad/s (it turns 0.07 rad while measured), each model.
 pub fn tilt_markdown(length: Length) -> String {
-    let (marbles, steps, repeats) = match length {
-        Length::Full => (1000, 8, 5),
-        Length::Quick => (200, 3, 3),
-    };
+    let (marbles, steps, repeats) = length.cost_sample();
     let mut out = String::from(
         "| tilt rate (rad/s) | time to tilt 0.1 rad | drift of the gravity-tilt model |\n| --- | --- | --- |\n",
     );
@@ -732,21 +744,7 @@ pub fn tilt_markdown(length: Length) -> String {
         scene.dt = 1.0 / 60.0;
         scene.boards[0].angular_velocity = [0.0, 0.0, 0.1];
         scene.tilt_as_gravity = cheap;
-        let mut sim = Simulation::from_scene(&scene).expect("valid bench scene");
-        for _ in 0..3 {
-            sim.step();
-        }
-        let mut samples: Vec<f64> = (0..repeats)
-            .map(|_| {
-                let t = Instant::now();
-                for _ in 0..steps {
-                    sim.step();
-                }
-                t.elapsed().as_secs_f64() * 1e9 / (marbles * steps) as f64
-            })
-            .collect();
-        samples.sort_by(f64::total_cmp);
-        samples[samples.len() / 2]
+        scene_cost(&scene, true, steps, repeats)
     };
     out.push_str(&format!(
         "\nCost at 0.1 rad/s, rolling on: moving board {:.0} ns/marble-step, gravity tilt {:.0}.\n",
