@@ -217,8 +217,8 @@ pub struct StepConfig {
     /// dt = 1e-6 s or 10 km from the origin. `marble tradeoff` reports its cost and effect.
     pub compensated: bool,
     /// Most impacts resolved per marble per substep with continuous collision. Default 8;
-    /// a marble still colliding after that many events (wedged between boards) stops at its
-    /// last safe position for the rest of the substep.
+    /// a marble still colliding after that many events (wedged between boards) finishes the
+    /// substep as without continuous collision (free path, then the end-of-substep check).
     pub max_impacts: u32,
 }
 

@@ -61,8 +61,8 @@
 //! and the spin `ω + α τ` stay exact there.
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
-//! that it would collide for ever stops at its last safe position for the rest of the
-//! substep.
+//! that it would collide for ever finishes the substep as without continuous collision: its
+//! free path, then the end-of-substep check.
 //!
 //! [`StepConfig::max_impacts`]: crate::config::StepConfig::max_impacts
 
@@ -257,11 +257,9 @@ fn resolve_with<const SPINS: bool>(
             Some(ts) if ts < span => (ts, true),
             _ => (span, false),
         };
-        if p.ccd {
-            if impacts >= p.max_impacts {
-                // Wedged: stay at the last safe position for the rest of the substep.
-                break;
-            }
+        // After `max_impacts` events the rest of the substep is left to the end-of-substep
+        // check, as without CCD (a wedged marble, or a search that keeps stopping short).
+        if p.ccd && impacts < p.max_impacts {
             let path = Path {
                 t0: t,
                 x: m.x0 + s.d,
