@@ -228,6 +228,40 @@ impl BoardGeometry {
         }
     }
 
+    /// When every marble centre in `region` (board frame) has its closest point on one flat
+    /// face of `piece` — so that its distance to the piece is affine in the centre — that
+    /// face's outward normal, board frame. Continuous collision then bounds the distance's
+    /// rate by the normal speed alone.
+    pub fn face_normal(&self, part: usize, piece: &Piece, region: &Aabb) -> Option<Vec3> {
+        let p = &self.parts[part];
+        let local = if p.identity {
+            *region
+        } else {
+            inverse_transform_aabb(region, p.translation, p.rotation)
+        };
+        let n = match piece {
+            Piece::HalfSpace => Vec3::Y,
+            Piece::Cuboid(c) => {
+                let h = c.half_extents;
+                let within = |j: usize| local.mins[j] >= -h[j] && local.maxs[j] <= h[j];
+                let mut found = None;
+                for i in 0..3 {
+                    let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+                    if within(j) && within(k) {
+                        if local.mins[i] >= h[i] {
+                            found = Some(Vec3::AXES[i]);
+                        } else if local.maxs[i] <= -h[i] {
+                            found = Some(-Vec3::AXES[i]);
+                        }
+                    }
+                }
+                found?
+            }
+            Piece::Triangle(_) | Piece::Bowl(_) => return None,
+        };
+        Some(p.rotation * n)
+    }
+
     /// Whether every piece of part `part` is convex.
     #[inline]
     pub fn part_is_convex(&self, part: usize) -> bool {

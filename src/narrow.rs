@@ -24,7 +24,10 @@
 //! farthest point the marble can reach. A head-on approach converges in one or two
 //! iterations; grazing approaches converge geometrically. For a moving board the bound is
 //! the marble's speed relative to the board's material point under it, which stays small
-//! for marbles riding a turning board. Because each step is safe, a
+//! for marbles riding a turning board; and where every centre the marble can reach has its
+//! closest point on one flat face (a plane, or a box face), only the normal part of that
+//! relative motion counts, so a marble sliding just above a surface does not make the
+//! advancement crawl. Because each step is safe, a
 //! marble at any speed never passes through a board, however thin.
 
 use std::sync::Arc;
@@ -423,6 +426,11 @@ pub fn earliest_impact(
         path.x.min(end) - Vec3::splat(reach),
         path.x.max(end) + Vec3::splat(reach),
     );
+    // Where the centre itself can be (no radius): for the flat-face bound below.
+    let centres = Aabb::new(
+        path.x.min(end) - Vec3::splat(bulge),
+        path.x.max(end) + Vec3::splat(bulge),
+    );
     let marble_speed = path.v.length() + path.a.length() * span;
     let hint = -path.v;
     let mut best: Option<(f32, PieceId)> = None;
@@ -438,6 +446,22 @@ pub fn earliest_impact(
         // Everything the marble can reach this substep, in the board's frame; a moving
         // board sees it through both end poses and, if it turns, a margin for the turn.
         let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());
+        let mut centre_query = transform_aabb(&centres, q0.conjugate() * -c0, q0.conjugate());
+        // The rate of the centre's distance to a flat face with normal n0 (world, at the
+        // path's start) is n(τ)·ẏ(τ) with |n(τ) − n0| ≤ |ω| τ: bounded by the normal
+        // component of the relative motion plus the turning terms (module docs).
+        let wv = b.angular_velocity;
+        let w = wv.length();
+        let rel = path.v - b.velocity;
+        let u0 = rel - wv.cross(path.x - c0);
+        let bb = path.a - wv.cross(rel);
+        let curl = 0.5 * span * span * w * path.a.length();
+        let face_speed = |n0: Vec3| {
+            n0.dot(u0).abs()
+                + span * n0.dot(bb).abs()
+                + curl
+                + w * span * (u0.length() + span * bb.length() + curl)
+        };
         // Speed bound of the marble relative to the board's frame (a still board: the
         // marble's own speed bound).
         let mut speed = marble_speed;
@@ -445,12 +469,20 @@ pub fn earliest_impact(
             let (c1, q1) = b.pose_at(path.t0 + span);
             let q_end = transform_aabb(&world, q1.conjugate() * -c1, q1.conjugate());
             query = Aabb::new(query.mins.min(q_end.mins), query.maxs.max(q_end.maxs));
+            let c_end = transform_aabb(&centres, q1.conjugate() * -c1, q1.conjugate());
+            centre_query = Aabb::new(
+                centre_query.mins.min(c_end.mins),
+                centre_query.maxs.max(c_end.maxs),
+            );
             let far = (path.x - c0).length() + (marble_speed + b.velocity.length()) * span;
-            let w = b.angular_velocity.length();
             let turn = w * span * far;
             query = Aabb::new(
                 query.mins - Vec3::splat(turn),
                 query.maxs + Vec3::splat(turn),
+            );
+            centre_query = Aabb::new(
+                centre_query.mins - Vec3::splat(turn),
+                centre_query.maxs + Vec3::splat(turn),
             );
             // The distance to a piece changes no faster than the marble's position in the
             // board's frame, y = Rᵀ(x − c), whose rate is the marble's velocity relative to
@@ -459,12 +491,7 @@ pub fn earliest_impact(
             //   u0 = v − v_b − ω × (x − c) at the path's start.
             // A marble riding a turning board has u0 ≈ 0, so the bound stays tight where
             // the board's own speed would make conservative advancement crawl.
-            let wv = b.angular_velocity;
-            let rel = path.v - b.velocity;
-            let u0 = rel - wv.cross(path.x - c0);
-            speed = u0.length()
-                + span * (path.a - wv.cross(rel)).length()
-                + 0.5 * span * span * w * path.a.length();
+            speed = u0.length() + span * bb.length() + curl;
         }
         if speed <= 0.0 {
             continue;
@@ -491,6 +518,15 @@ pub fn earliest_impact(
             let mut gap = gap_at(0.0);
             if gap <= tol {
                 return; // touching already: a contact, not an impact
+            }
+            // Over a flat face, only the normal motion counts: a marble sliding or riding
+            // just above a surface would otherwise make the advancement crawl.
+            let speed = match b.geometry.face_normal(part, piece, &centre_query) {
+                Some(n) => speed.min(face_speed(q0 * n)),
+                None => speed,
+            };
+            if speed <= 0.0 {
+                return;
             }
             // With |ḋ| ≤ L, the gap cannot fall to `tol` inside [τ, end] and climb back to
             // its value at the end unless (d(τ) − tol) + (d(end) − tol) ≤ L (end − τ): where
