@@ -510,10 +510,12 @@ fn settle<const SPINS: bool>(touches: &TouchList, s: &mut State, a: Vec3, sep: f
         for (i, tc) in list.iter().enumerate() {
             let rel = s.v - tc.board_velocity;
             if rel.dot(tc.normal) <= sep {
-                // Staying on the surface takes the surface's own normal acceleration: on a
-                // turning board the centripetal part and the turning of the normal,
-                // d/dt((v − v_b)·n) = (a − a_b)·n + (v − v_b)·(ω × n) ≥ 0.
-                let need = tc.surface_accel - rel.dot(tc.board_spin.cross(tc.normal));
+                // Staying on the surface takes the surface's own normal acceleration. On a
+                // turning board the contact point slides over material points of different
+                // velocities (v_b(p) changes at a_b + ω × (v − v_b)) while the normal turns
+                // (ṅ = ω × n), so d/dt((v − v_b)·n) = (a − a_b)·n + 2 (v − v_b)·(ω × n),
+                // centripetal and Coriolis terms, must stay ≥ 0.
+                let need = tc.surface_accel - 2.0 * rel.dot(tc.board_spin.cross(tc.normal));
                 let an = a.dot(tc.normal) - need;
                 if an < 0.0 {
                     a -= an * tc.normal;
