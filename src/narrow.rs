@@ -15,20 +15,21 @@
 //!
 //! # Time of impact
 //! Continuous collision asks, for each piece the marble does not yet touch, the first time
-//! `τ` in the substep at which `d(τ) = dist(x(τ), piece(τ)) − r` falls to `tol`, where
-//! `x(τ)` is the marble's path (the parabola of constant acceleration every integrator
-//! follows, see [`Integrator`](crate::config::Integrator)) and the piece moves with its
-//! board (translation and rotation). It uses **conservative advancement**: if `|ḋ| ≤ L` on the interval, no root
-//! lies before `τ + (d − tol/2)/L`, so stepping by that amount never passes an impact; the
-//! bound `L` is the marble's speed bound along its path plus the board's speed at the
-//! farthest point the marble can reach. A head-on approach converges in one or two
-//! iterations; grazing approaches converge geometrically. For a moving board the bound is
-//! the marble's speed relative to the board's material point under it, which stays small
-//! for marbles riding a turning board; and where every centre the marble can reach has its
-//! closest point on one flat face (a plane, or a box face), only the normal part of that
-//! relative motion counts, so a marble sliding just above a surface does not make the
-//! advancement crawl. Because each step is safe, a
-//! marble at any speed never passes through a board, however thin.
+//! `τ` in the substep at which `d(τ) = dist(x(τ), piece(τ)) − r` falls within the touching
+//! tolerance, where `x(τ)` is the marble's path (the parabola of constant acceleration every
+//! integrator follows, see [`Integrator`](crate::config::Integrator)) and the piece moves
+//! with its board (translation and rotation). It uses **conservative advancement**: if
+//! `|ḋ| ≤ L` on the interval, no root lies before `τ + (d − tol/4)/L`, so stepping by that
+//! amount never passes an impact; the search stops within `tol/2`, so that the touch
+//! gathered at the impact with the full tolerance includes the piece despite rounding. The
+//! bound `L` is the marble's speed bound along its path; for a moving board, the marble's
+//! speed relative to the board's material point under it (small for marbles riding a
+//! turning board); and where every centre the marble can reach has its closest point on
+//! one flat face (a plane, or a box face), only the normal part of that relative motion, so
+//! a marble sliding just above a surface does not make the advancement crawl. A head-on
+//! approach converges in one or two iterations; grazing approaches converge geometrically.
+//! Because each step is safe, a marble at any speed never passes through a board, however
+//! thin.
 
 use std::sync::Arc;
 
@@ -541,12 +542,15 @@ pub fn earliest_impact(
                         return;
                     }
                 }
-                tau += (gap - 0.5 * tol) / speed;
+                // Stop within half the tolerance (never closer than a quarter): the touch
+                // gathered at the impact, with the full tolerance, then certainly includes
+                // this piece despite rounding in positions.
+                tau += (gap - 0.25 * tol) / speed;
                 if tau >= limit {
                     return;
                 }
                 gap = gap_at(tau);
-                if gap <= tol {
+                if gap <= 0.5 * tol {
                     break;
                 }
             }
