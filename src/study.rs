@@ -537,18 +537,38 @@ pub fn format_dt(dt: f32) -> String {
     }
 }
 
-/// The study as a markdown table, one row per setting.
-pub fn markdown(rows: &[Row]) -> String {
-    let mut out =
-        String::from("| integrator | dt | substeps | CCD | ns/marble-step | µs/marble/s |");
+/// A markdown table header: the given columns, then one per reference scene.
+fn table_header(columns: &[&str]) -> String {
+    let names: Vec<&str> = columns
+        .iter()
+        .copied()
+        .chain(Reference::ALL.iter().map(|r| r.name()))
+        .collect();
+    format!(
+        "| {} |\n|{}\n",
+        names.join(" | "),
+        " --- |".repeat(names.len())
+    )
+}
+
+/// Ends a table row with the row's error on every reference scene.
+fn push_errors(out: &mut String, row: &Row) {
     for r in Reference::ALL {
-        out.push_str(&format!(" {} |", r.name()));
-    }
-    out.push_str("\n| --- | --- | --- | --- | --- | --- |");
-    for _ in Reference::ALL {
-        out.push_str(" --- |");
+        out.push_str(&format!(" {} |", format_error(r, row.error(r))));
     }
     out.push('\n');
+}
+
+/// The study as a markdown table, one row per setting.
+pub fn markdown(rows: &[Row]) -> String {
+    let mut out = table_header(&[
+        "integrator",
+        "dt",
+        "substeps",
+        "CCD",
+        "ns/marble-step",
+        "µs/marble/s",
+    ]);
     for row in rows {
         let s = &row.setting;
         out.push_str(&format!(
@@ -560,10 +580,7 @@ pub fn markdown(rows: &[Row]) -> String {
             row.ns_per_step,
             row.us_per_second()
         ));
-        for r in Reference::ALL {
-            out.push_str(&format!(" {} |", format_error(r, row.error(r))));
-        }
-        out.push('\n');
+        push_errors(&mut out, row);
     }
     out
 }
@@ -605,15 +622,7 @@ pub fn presets_markdown(length: Length) -> String {
         }
     }
     let rows = run(&settings, length, |_| {});
-    let mut out = String::from("| preset | dt | substeps | ns/marble-step | µs/marble/s |");
-    for r in Reference::ALL {
-        out.push_str(&format!(" {} |", r.name()));
-    }
-    out.push_str("\n| --- | --- | --- | --- | --- |");
-    for _ in Reference::ALL {
-        out.push_str(" --- |");
-    }
-    out.push('\n');
+    let mut out = table_header(&["preset", "dt", "substeps", "ns/marble-step", "µs/marble/s"]);
     for row in &rows {
         out.push_str(&format!(
             "| {:?} | {} | {} | {:.0} | {:.1} |",
@@ -623,10 +632,7 @@ pub fn presets_markdown(length: Length) -> String {
             row.ns_per_step,
             row.us_per_second()
         ));
-        for r in Reference::ALL {
-            out.push_str(&format!(" {} |", format_error(r, row.error(r))));
-        }
-        out.push('\n');
+        push_errors(&mut out, row);
     }
     out
 }
