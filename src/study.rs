@@ -551,6 +551,17 @@ fn table_header(columns: &[&str]) -> String {
     )
 }
 
+/// The integrator, dt, substeps and CCD cells of a setting's table row.
+fn setting_cells(s: &Setting) -> String {
+    format!(
+        "{:?} | {} | {} | {}",
+        s.integrator,
+        format_dt(s.dt),
+        s.substeps,
+        if s.ccd { "on" } else { "off" }
+    )
+}
+
 /// Ends a table row with the row's error on every reference scene.
 fn push_errors(out: &mut String, row: &Row) {
     for r in Reference::ALL {
@@ -570,13 +581,9 @@ pub fn markdown(rows: &[Row]) -> String {
         "µs/marble/s",
     ]);
     for row in rows {
-        let s = &row.setting;
         out.push_str(&format!(
-            "| {:?} | {} | {} | {} | {:.0} | {:.1} |",
-            s.integrator,
-            format_dt(s.dt),
-            s.substeps,
-            if s.ccd { "on" } else { "off" },
+            "| {} | {:.0} | {:.1} |",
+            setting_cells(&row.setting),
             row.ns_per_step,
             row.us_per_second()
         ));
@@ -597,13 +604,9 @@ pub fn front_markdown(rows: &[Row]) -> String {
         ));
         for i in pareto_front(rows, reference) {
             let r = &rows[i];
-            let s = &r.setting;
             out.push_str(&format!(
-                "| {:?} | {} | {} | {} | {:.1} | {} |\n",
-                s.integrator,
-                format_dt(s.dt),
-                s.substeps,
-                if s.ccd { "on" } else { "off" },
+                "| {} | {:.1} | {} |\n",
+                setting_cells(&r.setting),
                 r.us_per_second(),
                 format_error(reference, r.error(reference))
             ));
