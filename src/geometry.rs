@@ -110,7 +110,14 @@ pub struct Part {
 pub struct BoardGeometry {
     parts: Vec<Part>,
     aabb: Option<Aabb>,
+    /// For compounds of many parts: a BVH over the bounded parts' bounds (leaf = part
+    /// index), and the unbounded parts, so that a query visits only the parts it can reach
+    /// (a labyrinth tiled over a large board has thousands of walls).
+    index: Option<(parry3d::partitioning::Bvh, Vec<usize>)>,
 }
+
+/// Compounds with more parts than this get a BVH over their parts.
+const PART_BVH_MIN: usize = 16;
 
 /// A convex piece of a board, in its part's frame.
 #[derive(Clone, Copy, Debug)]
@@ -174,9 +181,23 @@ impl BoardGeometry {
                 Some(b) => Aabb::new(b.mins.min(a.mins), b.maxs.max(a.maxs)),
             }))
         });
+        let index = (parts.len() > PART_BVH_MIN).then(|| {
+            let bvh = parry3d::partitioning::Bvh::from_iter(
+                parry3d::partitioning::BvhBuildStrategy::Binned,
+                parts
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, p)| p.aabb.map(|a| (i, a))),
+            );
+            let unbounded = (0..parts.len())
+                .filter(|&i| parts[i].aabb.is_none())
+                .collect();
+            (bvh, unbounded)
+        });
         BoardGeometry {
             parts,
             aabb: aabb.flatten(),
+            index,
         }
     }
 
@@ -193,12 +214,30 @@ impl BoardGeometry {
     /// Calls `f(part, sub, piece)` for every piece that may intersect `query` (board frame).
     #[inline]
     pub fn for_each_piece(&self, query: &Aabb, mut f: impl FnMut(usize, u32, &Piece)) {
+        if let Some((bvh, unbounded)) = &self.index {
+            for &i in unbounded {
+                self.part_pieces(i, query, &mut f);
+            }
+            for i in bvh.intersect_aabb(query) {
+                self.part_pieces(i as usize, query, &mut f);
+            }
+            return;
+        }
         for (i, part) in self.parts.iter().enumerate() {
             if let Some(a) = &part.aabb
                 && !overlaps(a, query)
             {
                 continue;
             }
+            self.part_pieces(i, query, &mut f);
+        }
+    }
+
+    /// The pieces of part `i` that may intersect `query` (board frame).
+    #[inline]
+    fn part_pieces(&self, i: usize, query: &Aabb, f: &mut impl FnMut(usize, u32, &Piece)) {
+        let part = &self.parts[i];
+        {
             let q = if part.identity {
                 *query
             } else if part.unrotated {

@@ -7,6 +7,7 @@ pub mod config;
 pub mod geometry;
 pub mod narrow;
 pub mod output;
+pub mod pairs;
 #[cfg(feature = "bevy")]
 pub mod plugin;
 pub mod response;
@@ -35,6 +36,7 @@ pub mod prelude {
     };
     pub use crate::config::{GravityTilt, Integrator, Preset, StepConfig};
     pub use crate::geometry::{BoardGeometry, PartShape};
+    pub use crate::pairs::{MarbleContact, MarbleContacts};
     #[cfg(feature = "bevy")]
     pub use crate::plugin::MarblePhysicsPlugin;
     pub use crate::scene::{BoardDesc, MarbleDesc, Scene, SceneError, ShapeDesc};

@@ -68,8 +68,12 @@ pub struct Scene {
     pub ccd: bool,
     /// Spin and friction at contacts (marbles roll).
     pub rolling: bool,
-    /// Marble–marble collisions (not yet supported).
+    /// Marble–marble collisions.
     pub marble_collisions: bool,
+    /// Passes of the marble–marble contact solver per substep, ≥ 1 (default 10). An
+    /// extension of the contract.
+    #[serde(skip_serializing_if = "is_default_iterations")]
+    pub solver_iterations: u32,
     /// Model the turning board by turning gravity instead (Neverball's way): the board
     /// stays still, gravity tilts back. Cheaper and approximate; see
     /// [`GravityTilt`](crate::config::GravityTilt). Every turning board must share one
@@ -98,6 +102,7 @@ impl Default for Scene {
             ccd: c.ccd,
             rolling: false,
             marble_collisions: false,
+            solver_iterations: c.solver_iterations,
             tilt_as_gravity: false,
             restitution_threshold: c.restitution_threshold,
             duration: 10.0,
@@ -259,6 +264,10 @@ pub struct PartDesc {
     pub rotation: [f32; 4],
 }
 
+fn is_default_iterations(n: &u32) -> bool {
+    *n == StepConfig::default().solver_iterations
+}
+
 fn is_false(b: &bool) -> bool {
     !*b
 }
@@ -356,11 +365,8 @@ impl Scene {
             }
         }
         non_negative("duration", self.duration)?;
-        if self.marble_collisions {
-            return Err(SceneError::Unsupported {
-                field: "marble_collisions".into(),
-                what: "marble-marble collision".into(),
-            });
+        if self.solver_iterations == 0 {
+            return invalid("solver_iterations", ">= 1", self.solver_iterations);
         }
         for (i, b) in self.boards.iter().enumerate() {
             let f = |name: &str| format!("boards[{i}].{name}");
@@ -462,6 +468,8 @@ impl Scene {
             ccd: self.ccd,
             restitution_threshold: self.restitution_threshold,
             rolling: self.rolling,
+            marble_collisions: self.marble_collisions,
+            solver_iterations: self.solver_iterations,
             ..StepConfig::default()
         };
         if let Some(preset) = self.preset {

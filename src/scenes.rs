@@ -24,38 +24,157 @@ pub fn walled_floor(half: f32, wall_height: f32) -> Vec<PartDesc> {
     ]
 }
 
-/// The built-in scene of `marble` and `marble scene`: a 40 cm labyrinth board with walls
-/// and inner baffles, tilting slowly through level (−0.1 rad about X to +0.1 rad over
-/// 10 s), and 48 glass marbles dropped onto it.
+/// The built-in scene of `marble` and `marble scene`: bench scene (c) with 48 marbles, a
+/// 40 cm labyrinth board with walls and inner baffles, tilting slowly through level
+/// (−0.1 rad about X to +0.1 rad over 10 s), the marbles dropped onto it and colliding
+/// with each other.
 pub fn default_scene() -> Scene {
-    let half = 0.2;
+    labyrinth(48)
+}
+
+/// Marbles per labyrinth tile in [`labyrinth`].
+const LABYRINTH_TILE: usize = 48;
+
+/// Bench scene (c): the default labyrinth scaled to `n` marbles. The 40 cm labyrinth
+/// pattern (three baffles, 48 marbles dropped in an 8 × 6 grid) is tiled `k × k` times,
+/// `k = ⌈√(n / 48)⌉`, inside one walled board `0.4 k` metres wide that tilts about X
+/// through level (−0.1 rad to +0.1 rad over 10 s); tiles fill in order until `n` marbles
+/// are placed. Marbles collide with each other.
+pub fn labyrinth(n: usize) -> Scene {
+    let tile = 0.4f32;
+    let k = n.div_ceil(LABYRINTH_TILE).max(1).isqrt();
+    let k = if k * k * LABYRINTH_TILE < n { k + 1 } else { k };
+    let half = 0.5 * tile * k as f32;
     let mut parts = walled_floor(half, 0.03);
-    // Inner baffles of the labyrinth.
-    for (i, z) in [-0.1f32, 0.0, 0.1].iter().enumerate() {
-        let x = if i % 2 == 0 { -0.05 } else { 0.05 };
-        parts.push(cuboid([0.15, 0.015, 0.005], [x, 0.015, *z]));
+    let centre = |t: usize| (t as f32 - 0.5 * (k as f32 - 1.0)) * tile;
+    for ti in 0..k {
+        for tj in 0..k {
+            let (cx, cz) = (centre(ti), centre(tj));
+            // The inner baffles of the labyrinth.
+            for (i, z) in [-0.1f32, 0.0, 0.1].iter().enumerate() {
+                let x = if i % 2 == 0 { -0.05 } else { 0.05 };
+                parts.push(cuboid([0.15, 0.015, 0.005], [cx + x, 0.015, cz + z]));
+            }
+        }
     }
     let tilt = -0.1f32;
     let mut board = BoardDesc::new(ShapeDesc::Compound(parts));
     board.rotation = [(tilt / 2.0).sin(), 0.0, 0.0, (tilt / 2.0).cos()];
     board.angular_velocity = [0.02, 0.0, 0.0];
     board.restitution = 0.6;
-    let mut marbles = Vec::new();
-    for i in 0..8 {
-        for j in 0..6 {
+    let marbles = (0..n)
+        .map(|m| {
+            let (t, q) = (m / LABYRINTH_TILE, m % LABYRINTH_TILE);
+            let (cx, cz) = (centre(t % k), centre(t / k));
+            let (i, j) = (q / 6, q % 6);
             let x = -0.17 + 0.048 * i as f32;
             let z = -0.17 + 0.065 * j as f32 + 0.01;
-            let mut m = MarbleDesc::at([x, 0.06 + 0.004 * ((i + j) % 3) as f32, z]);
-            m.restitution = 0.7;
-            marbles.push(m);
-        }
-    }
+            let mut marble = MarbleDesc::at([cx + x, 0.06 + 0.004 * ((i + j) % 3) as f32, cz + z]);
+            marble.restitution = 0.7;
+            marble
+        })
+        .collect();
     Scene {
         dt: 1.0 / 240.0,
         duration: 10.0,
+        marble_collisions: true,
         boards: vec![board],
         marbles,
         ..Scene::default()
+    }
+}
+
+/// Layers of marbles in [`pour_box`].
+const POUR_LAYERS: usize = 10;
+
+/// Bench scene (b): `n` marbles poured into a walled box (dense contact). The marbles
+/// start in ten layers on a lattice 2.2 radii apart, each nudged sideways by up to 0.1 r
+/// (a fixed pseudo-random pattern, so that they fall into a packing rather than balance
+/// in columns), over a square box just wide enough for them; they fall, collide, and
+/// settle into a pile. dt = 1/60 s in 8 substeps, restitution 0.5, marble collisions on.
+pub fn pour_box(n: usize) -> Scene {
+    let r = crate::components::DEFAULT_RADIUS;
+    let spacing = 2.2 * r;
+    let side = n.div_ceil(POUR_LAYERS).max(1).isqrt();
+    let side = if side * side * POUR_LAYERS < n {
+        side + 1
+    } else {
+        side
+    };
+    let half = 0.5 * spacing * side as f32;
+    let layers = n.div_ceil(side * side);
+    let wall = spacing * layers as f32 + 0.1;
+    let board = BoardDesc::new(ShapeDesc::Compound(walled_floor(half, wall)));
+    // A fixed pattern of nudges in [−1, 1] (a 32-bit LCG), the same on every machine.
+    let mut seed = 0x2545_f491u32;
+    let mut nudge = move || {
+        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (seed >> 8) as f32 / (1u32 << 23) as f32 - 1.0
+    };
+    let marbles = (0..n)
+        .map(|m| {
+            let (layer, q) = (m / (side * side), m % (side * side));
+            let (i, j) = (q % side, q / side);
+            let x = -half + spacing * (i as f32 + 0.5) + 0.1 * r * nudge();
+            let z = -half + spacing * (j as f32 + 0.5) + 0.1 * r * nudge();
+            MarbleDesc::at([x, 1.2 * r + spacing * layer as f32, z])
+        })
+        .collect();
+    Scene {
+        dt: 1.0 / 60.0,
+        // A dense pile at 1/60 s needs substeps: in one 1/60 s step a marble falls a third
+        // of its radius, and a crash of ten layers then leaves overlaps the solver cannot
+        // take out; at 1/480 s the pile settles with overlaps under 1% of the radius.
+        substeps: 8,
+        duration: 5.0,
+        marble_collisions: true,
+        boards: vec![board],
+        marbles,
+        ..Scene::default()
+    }
+}
+
+/// The three bench scenes, shared by the criterion benches, the tests, the rapier
+/// comparison and `marble scene --bench`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BenchScene {
+    /// (a) [`walled_board`]: marbles on a tilted walled board, never touching each other.
+    WalledBoard,
+    /// (b) [`pour_box`]: marbles poured into a walled box (dense contact).
+    PourBox,
+    /// (c) [`labyrinth`]: the default labyrinth scaled to N marbles.
+    Labyrinth,
+}
+
+impl BenchScene {
+    /// All three, in order (a), (b), (c).
+    pub const ALL: [BenchScene; 3] = [
+        BenchScene::WalledBoard,
+        BenchScene::PourBox,
+        BenchScene::Labyrinth,
+    ];
+
+    /// The scene with `n` marbles.
+    pub fn build(self, n: usize) -> Scene {
+        match self {
+            BenchScene::WalledBoard => walled_board(n),
+            BenchScene::PourBox => pour_box(n),
+            BenchScene::Labyrinth => labyrinth(n),
+        }
+    }
+
+    /// Short name, as on the command line and in bench ids.
+    pub fn name(self) -> &'static str {
+        match self {
+            BenchScene::WalledBoard => "walled_board",
+            BenchScene::PourBox => "pour_box",
+            BenchScene::Labyrinth => "labyrinth",
+        }
+    }
+
+    /// The scene of this short name.
+    pub fn from_name(name: &str) -> Option<BenchScene> {
+        BenchScene::ALL.into_iter().find(|b| b.name() == name)
     }
 }
 

@@ -4,7 +4,7 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::{LogLevel, ScheduleBuildSettings, ScheduleLabel};
 
 use crate::config::{StepConfig, SubstepCounter};
-use crate::systems::{boards, detect, forces, integrate, respond};
+use crate::systems::{boards, collide, detect, forces, integrate, respond};
 
 /// The schedule that runs one substep. A step runs it `substeps` times
 /// ([`run_step`]).
@@ -25,6 +25,8 @@ pub enum MarbleSystems {
     DetectContacts,
     /// Equation (1), contacts, continuous collision, position correction.
     Respond,
+    /// Marble–marble collisions and contacts (only with `marble_collisions` on).
+    CollideMarbles,
     /// Kinematic boards advance.
     MoveBoards,
     /// Last substep only: clear forces, quarantine non-finite marbles.
@@ -48,6 +50,7 @@ pub fn substep_schedule() -> Schedule {
             MarbleSystems::Integrate,
             MarbleSystems::DetectContacts,
             MarbleSystems::Respond,
+            MarbleSystems::CollideMarbles,
             MarbleSystems::MoveBoards,
             MarbleSystems::Finish,
         )
@@ -65,6 +68,9 @@ pub fn substep_schedule() -> Schedule {
         )
             .chain()
             .in_set(MarbleSystems::Respond),
+        collide::collide_marbles
+            .run_if(|c: Res<StepConfig>| c.marble_collisions)
+            .in_set(MarbleSystems::CollideMarbles),
         (
             boards::move_boards,
             boards::advance_tilt.run_if(resource_exists::<crate::config::GravityTilt>),
@@ -84,6 +90,8 @@ pub fn init_resources(world: &mut World) {
     world.init_resource::<StepConfig>();
     world.init_resource::<SubstepCounter>();
     world.init_resource::<crate::narrow::BoardCache>();
+    world.init_resource::<crate::pairs::PairSolver>();
+    world.init_resource::<crate::pairs::MarbleContacts>();
 }
 
 /// Runs one step: `substeps` runs of the substep schedule through `run_substep`.

@@ -10,10 +10,12 @@
 //! | `Integrate` | `integrate.rs` | free motion over the substep with the chosen integrator |
 //! | `DetectContacts` | `detect.rs` | touches at the start (collision or contact), else the first impact (CCD) or the end overlap |
 //! | `Respond` | `respond.rs` | impacts and contacts of the marbles detection flagged |
+//! | `CollideMarbles` | `collide.rs` | marble–marble collisions and contacts (only with `marble_collisions`) |
 //! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities |
 //! | `Finish` | `forces.rs` | on the last substep: clear forces, quarantine non-finite marbles |
 
 pub mod boards;
+pub mod collide;
 pub mod detect;
 pub mod forces;
 pub mod integrate;

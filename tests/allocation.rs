@@ -34,10 +34,15 @@ unsafe impl GlobalAlloc for Counting {
 static GLOBAL: Counting = Counting;
 
 /// Once warmed up, stepping allocates nothing: 100 steps of 1,000 marbles on the walled
-/// board (contacts, walls, CCD) and of the tilting labyrinth scene.
+/// board (contacts, walls, CCD), of the tilting labyrinth scene (marbles colliding with
+/// each other) and of 1,000 marbles poured into a box (the pile solver).
 #[test]
 fn stepping_does_not_allocate() {
-    for scene in [scenes::walled_board(1000), scenes::default_scene()] {
+    for scene in [
+        scenes::walled_board(1000),
+        scenes::default_scene(),
+        scenes::pour_box(1000),
+    ] {
         let mut sim = Simulation::from_scene(&scene).unwrap();
         for _ in 0..10 {
             sim.step();
@@ -47,6 +52,11 @@ fn stepping_does_not_allocate() {
             sim.step();
         }
         let after = ALLOCATIONS.load(Ordering::Relaxed);
-        assert_eq!(after - before, 0, "allocations during 100 steps");
+        assert_eq!(
+            after - before,
+            0,
+            "allocations during 100 steps of {} marbles",
+            scene.marbles.len()
+        );
     }
 }

