@@ -1,7 +1,9 @@
 //! Steps N marbles on a 1°-tilted walled board (`scenes::walled_board`, bench scene (a)):
 //! the cost of one marble-step of the smooth-surface model, for N = 1k, 10k, 100k.
 //!
-//! The `rolling` group steps 10,000 of them with rolling off and on.
+//! The `rolling` group steps 10,000 of them with rolling off and on; the
+//! `marble_collisions` group steps the three bench scenes (a), (b), (c) with marble–marble
+//! collisions on.
 //!
 //! `cargo bench --bench step`; criterion reports the time per step and, with
 //! `Throughput::Elements(N)`, marble-steps per second (ns per marble-step = 1e9 / that).
@@ -72,5 +74,29 @@ fn rolling(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, walled_board, rolling);
+/// The three bench scenes with marble–marble collisions on ([`scenes::BenchScene`]): (a)
+/// the walled board (marbles never touch each other, so this is the broad phase's cost),
+/// (b) marbles poured into a box (dense contact; the scene runs 8 substeps per 1/60 s
+/// step) and (c) the labyrinth scaled to N. Throughput is marble-steps.
+fn marble_collisions(c: &mut Criterion) {
+    let mut group = c.benchmark_group("marble_collisions");
+    for (kind, sizes) in [
+        (
+            scenes::BenchScene::WalledBoard,
+            &[1_000usize, 10_000, 100_000][..],
+        ),
+        (scenes::BenchScene::PourBox, &[1_000, 10_000][..]),
+        (scenes::BenchScene::Labyrinth, &[1_000, 10_000, 100_000][..]),
+    ] {
+        for &n in sizes {
+            let mut scene = kind.build(n);
+            scene.marble_collisions = true;
+            group.sample_size(10);
+            bench_scene(&mut group, BenchmarkId::new(kind.name(), n), &scene);
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, walled_board, rolling, marble_collisions);
 criterion_main!(benches);
