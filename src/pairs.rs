@@ -10,46 +10,63 @@
 //! cancelled through the whole pile. One pass of pairwise impulses does neither.
 //!
 //! # The method
-//! After the marble–board response of each substep (every marble then has its end position
-//! and velocity), this stage runs for all marbles together:
+//! Two stages per substep, both only with `marble_collisions` on.
+//!
+//! **Before integration** ([`PairSolver::contacts`], stage `MarbleContacts`), at the
+//! substep's start, where positions are consistent:
 //!
 //! 1. **Broad phase: a hashed uniform grid**, linear in the number of marbles. Each marble
-//!    is bounded by the sphere around its swept path over the substep (centre midway,
-//!    radius `r + |Δx|/2 + tolerance`). Cells are as wide as the largest such sphere's
-//!    diameter among the ordinary marbles (those at most twice the mean), so two ordinary
-//!    marbles can touch only in the same or adjacent cells; marbles are counting-sorted by
-//!    cell hash, and each cell is paired with itself and its 13 "forward" neighbours
-//!    (every neighbouring pair of cells once). The rare large or fast marbles are paired
-//!    through the cells their bound covers, or with every marble when that is fewer. The
-//!    grid was chosen over sweep-and-prune (marbles on a board share one height, so sorting
-//!    along an axis pairs whole rows) and over a BVH (rebuilt every substep for moving
-//!    spheres, it costs `N log N` with pointer-chasing; a grid of uniform spheres is one
-//!    counting sort).
-//! 2. **Narrow phase: exact sphere–sphere.** A pair touching at the substep's start
-//!    (within the touching tolerance) is judged, like board contacts, on its closing speed
-//!    *before this step's forces*: faster than `restitution_threshold` is a collision,
-//!    otherwise a contact. With continuous collision, a pair that was apart finds its time
-//!    of impact along the relative path — linear, and exactly so for marbles in free flight
-//!    under the same gravity — by the root of `|D₀ + (D₁ − D₀) τ| = r₁ + r₂`.
-//! 3. **Collisions, as a cascade of exact impacts.** Each collision gets the two-body
-//!    equation, earliest first; the marbles then leave the impact with their new velocity
-//!    for the rest of the substep (their positions move by `Δv (h − t*)`, which makes an
-//!    isolated impact exact at any step). An impulse can make a touching neighbour
-//!    approach faster than the threshold: that pair then collides in turn, at the same
-//!    instant, and so on. A Newton's cradle therefore passes the motion to its last marble
-//!    instead of spreading it over the line, and every impulse conserves momentum and
-//!    never adds energy.
-//! 4. **Contacts: sequential impulses with warm starting.** Every pair touching at the end
-//!    of the substep, and the board contacts of those marbles, are solved together by
-//!    projected Gauss–Seidel on the end velocities: no approaching normal velocity, each
-//!    accumulated impulse ≥ 0. Each pass starts from the impulses of the previous substep
-//!    (a pile's weight carries over), so a pile settles in a few passes per substep. A
-//!    contact impulse stands for a force over the substep, so the marbles' positions move
-//!    by it as the integrator would move them under that force (`½ Δv h` for Verlet): a
-//!    marble resting on another stays where it is, as on a board.
-//! 5. **Overlap.** Whatever overlap remains beyond a small slop (`0.2%` of the smaller
-//!    radius) is projected out of positions (mass-weighted; boards do not move), without
-//!    touching velocities, so no energy is added for it.
+//!    is bounded by the sphere around its free path over the substep (its integrator's
+//!    displacement under its acceleration, plus a margin). Cells are as wide as the largest
+//!    such sphere's diameter among the ordinary marbles (those at most twice the mean), so
+//!    two ordinary marbles can touch only in the same or adjacent cells; marbles are
+//!    counting-sorted by cell hash, and each cell is paired with itself and its 13
+//!    "forward" neighbours (every neighbouring pair of cells once). The rare large or fast
+//!    marbles are paired through the cells their bound covers, or with every marble when
+//!    that is fewer. The grid was chosen over sweep-and-prune (marbles on a board share one
+//!    height, so sorting along an axis pairs whole rows) and over a BVH (rebuilt every
+//!    substep for moving spheres, it costs `N log N` with pointer-chasing; a grid of
+//!    uniform spheres is one counting sort).
+//! 2. **Narrow phase: exact sphere–sphere.** A pair touching at the start (within the
+//!    touching tolerance) is judged, like board contacts, on its closing speed *before
+//!    this step's forces*: faster than `restitution_threshold` is a collision, otherwise a
+//!    contact.
+//! 3. **Collisions at the start** get the two-body equation as a velocity change before the
+//!    step's motion (exact for any integrator), as a cascade (below).
+//! 4. **Contacts: sequential impulses with warm starting.** Every touching pair, and the
+//!    board contacts of those marbles, are solved together by projected Gauss–Seidel on the
+//!    velocities the marbles would reach at the end of the substep: no approaching normal
+//!    velocity, each accumulated impulse ≥ 0, starting from the previous substep's
+//!    impulses (a pile's weight carries over). The impulses are then applied as *forces
+//!    over the substep* (added to each marble's acceleration), so every integrator moves
+//!    the marbles consistently with them and the marble–board response handles the boards
+//!    exactly as for a lone marble: a marble resting on another stays where it is.
+//! 5. **Overlap** beyond a small slop (0.2% of the smaller radius) is projected out of
+//!    positions, a share per pass (mass-weighted; boards do not move), without touching
+//!    velocities, so no energy is added for it.
+//!
+//! **After the marble–board response** ([`PairSolver::impacts`], stage `CollideMarbles`),
+//! with continuous collision: a pair that was apart at the start and met during the
+//! substep finds its time of impact along the relative path — linear, and exactly so for
+//! marbles in free flight under the same gravity — by the root of
+//! `|D₀ + (D₁ − D₀) τ| = r₁ + r₂`. If it would end overlapping by more than 5% of the
+//! radius (or passed through), it collides there; a shallower meeting is left to the next
+//! substep's contact stage, which judges it on the same closing speed (resolving it here
+//! would stir a settled pile for nothing).
+//!
+//! **The cascade.** Collisions get the two-body equation, earliest first; after an impact
+//! inside the substep the marbles leave with their new velocity for the rest of it (their
+//! positions move by `Δv (h − t*)`, which makes an isolated impact exact at any step). An
+//! impulse can make a touching neighbour approach faster than the threshold, or drive a
+//! marble into a board it touches: that pair (or board) then collides in turn, at the same
+//! instant, and so on. A Newton's cradle therefore passes the motion to its last marble
+//! instead of spreading it over the line, every impulse conserves momentum (boards aside)
+//! and none adds energy. Marbles a collision sends off their free paths are checked, on the
+//! end positions, against marbles the broad phase did not pair with them (a few rounds).
+//!
+//! Piles need short substeps: at 1/60 s a marble falls a third of its radius per substep
+//! and a crash of many layers leaves overlaps the projection cannot take out; bench scene
+//! (b) uses 8 substeps and 30 solver passes (see the README's measurements).
 //!
 //! Marble–marble contacts are smooth (no friction) even with rolling on.
 
@@ -69,6 +86,14 @@ pub const PAIR_SLOP: f32 = 2e-3;
 const PROJECTION: f32 = 0.2;
 /// Most a pass moves a marble apart, as a fraction of the radius.
 const MAX_PROJECTION: f32 = 0.02;
+
+/// Extra room around each marble's free path in the broad phase, as a fraction of its
+/// radius, for the contact forces' change of path.
+const BOUND_MARGIN: f32 = 0.1;
+
+/// Impacts that would leave less overlap than this share of the radius at the end of
+/// the substep are resolved by the next substep's contact stage instead.
+const DISCRETE_OVERLAP: f32 = 0.05;
 
 /// Rounds of looking for what collided marbles run into on their new paths.
 const LATE_ROUNDS: usize = 4;
@@ -98,6 +123,11 @@ pub struct Body {
     pub r: f32,
     /// Restitution.
     pub e: f32,
+    /// Acceleration over the substep (before contact forces); the contact stage adds the
+    /// contact forces to it.
+    pub a: Vec3,
+    /// Free displacement over the substep under `a`, as the integrator will move it.
+    pub d: Vec3,
 }
 
 /// A contact between two marbles during the last substep.
@@ -157,19 +187,30 @@ struct Row {
     t: f32,
     /// Pair restitution.
     e: f32,
-    /// Touching tolerance of the pair.
-    tol: f32,
     /// `1 / (w_i + w_j)`.
     k: f32,
+    /// The row collides when closing faster than this, m/s.
+    limit: f32,
+    /// How the pair was found.
+    kind: Found,
     /// Collided in this substep.
     collided: bool,
+}
+
+/// How a pair was found by the narrow phase.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Found {
+    /// Touching at the substep's start.
+    Start,
+    /// Apart at the start, meeting during the substep.
+    Impact,
+    /// Apart at the start, within the touching tolerance at the end.
+    End,
 }
 
 /// A contact row of the velocity solver: a pair or a marble on a board.
 #[derive(Clone, Copy, Debug)]
 struct Constraint {
-    /// Least closing speed allowed, m/s.
-    target: f32,
     i: u32,
     /// The other marble, or `u32::MAX` for a board.
     j: u32,
@@ -413,9 +454,6 @@ pub struct PairParams {
     pub tolerance: f32,
     /// Gauss–Seidel passes.
     pub iterations: u32,
-    /// Share of a velocity change over the substep that shows in the position, per second
-    /// of substep (the integrator's: `½` for Verlet and RK4, `1` for semi-implicit Euler).
-    pub position_share: f32,
 }
 
 /// The pair stage's state: reusable buffers and the warm-start impulses (a resource).
@@ -435,6 +473,9 @@ pub struct PairSolver {
     dv: Vec<Vec3>,
     event: Vec<f32>,
     known: Vec<(u32, u32)>,
+    candidates: Vec<(u32, u32)>,
+    /// The bodies' entities when the candidates were found.
+    entities: Vec<Entity>,
     late: Vec<Row>,
     adjacency_start: Vec<u32>,
     adjacency: Vec<u32>,
@@ -453,10 +494,13 @@ pub struct PairSolver {
 }
 
 impl PairSolver {
-    /// Runs the stage on [`PairSolver::bodies`] and [`PairSolver::board_touches`],
-    /// updating their end positions and velocities (and [`PairSolver::changed`]), and
-    /// records the contacts in `out`.
-    pub fn solve(&mut self, p: &PairParams, out: &mut MarbleContacts) {
+    /// The contact stage, before integration (module docs, steps 1–2 and 4–5), on
+    /// [`PairSolver::bodies`] at the substep's start (`x`, `v`, `a`, `d` set; `x0 = x`,
+    /// `v0 = v`) and [`PairSolver::board_touches`] (the previous substep's board contacts):
+    /// collisions of touching pairs become velocity changes at the start, contacts become
+    /// forces added to `a`, overlaps are projected out of `x`. Records the touching pairs
+    /// in `out` and keeps the candidate pairs for [`PairSolver::impacts`].
+    pub fn contacts(&mut self, p: &PairParams, out: &mut MarbleContacts) {
         out.list.clear();
         let n = self.bodies.len();
         if n > self.reserved_for {
@@ -464,32 +508,119 @@ impl PairSolver {
         }
         self.changed.clear();
         self.changed.resize(n, false);
-        // 1. Broad phase.
+        // 1. Broad phase over the free paths.
         self.bound.clear();
         self.bound.extend(self.bodies.iter().map(|b| {
             let tol = crate::narrow::touch_tolerance(p.tolerance, b.r, b.x);
-            let c = 0.5 * (b.x0 + b.x);
-            c.extend(b.r + 0.5 * (b.x - b.x0).length() + tol)
+            (b.x + 0.5 * b.d).extend(b.r * (1.0 + BOUND_MARGIN) + 0.5 * b.d.length() + tol)
         }));
         self.grid.build(&self.bound);
-        // 2. Narrow phase.
-        self.rows.clear();
+        self.entities.clear();
+        self.entities.extend(self.bodies.iter().map(|b| b.entity));
+        self.candidates.clear();
         {
-            let (bodies, rows, grid, bound) =
-                (&self.bodies, &mut self.rows, &self.grid, &self.bound);
-            grid.pairs(bound, |i, j| {
-                let (i, j) = if i < j { (i, j) } else { (j, i) };
-                if let Some(row) = narrow(bodies, i, j, p) {
-                    rows.push(row);
-                }
-            });
+            let (candidates, grid, bound) = (&mut self.candidates, &self.grid, &self.bound);
+            grid.pairs(bound, |i, j| candidates.push((i.min(j), i.max(j))));
+        }
+        // 2. The touching pairs.
+        self.rows.clear();
+        for &(i, j) in &self.candidates {
+            if let Some(row) = narrow(&self.bodies, i, j, p)
+                && row.kind == Found::Start
+            {
+                self.rows.push(row);
+            }
         }
         if self.rows.is_empty() {
             self.warm.clear();
             return;
         }
-        // 3. Collisions.
-        if self.collide(p) {
+        // 3. Collisions of touching pairs: velocity changes at the start.
+        self.collide(p, false);
+        // 4. Contacts: forces over the substep.
+        self.solve_contacts(p);
+        // 5. Overlap.
+        self.project();
+        for row in &self.rows {
+            let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
+            out.list.push(MarbleContact {
+                a: a.entity,
+                b: b.entity,
+                normal: row.n,
+                depth: a.r + b.r - (b.x - a.x).length(),
+                closing_speed: row.u,
+                kind: if row.collided {
+                    ContactKind::Collision
+                } else {
+                    ContactKind::Contact
+                },
+                time: 0.0,
+            });
+        }
+    }
+
+    /// The impact stage, after the marble–board response (module docs, step 3 for pairs
+    /// that were apart at the start), on [`PairSolver::bodies`] with `x0`, `v0` at the
+    /// substep's start and `x`, `v` at its end, and [`PairSolver::board_touches`] (this
+    /// substep's board contacts): pairs that meet during the substep collide at their
+    /// time of impact, exactly, and pass the impact on. Records the impacts in `out`.
+    pub fn impacts(&mut self, p: &PairParams, out: &mut MarbleContacts) {
+        let n = self.bodies.len();
+        self.changed.clear();
+        self.changed.resize(n, false);
+        // The candidates hold every pair that can meet if each marble stayed within the
+        // bound of its free path; a marble the boards sent elsewhere calls for a new
+        // broad phase over the swept paths.
+        let strayed = self.bound.len() != n
+            || self.entities.len() != n
+            || self
+                .bodies
+                .iter()
+                .zip(&self.entities)
+                .any(|(b, e)| b.entity != *e)
+            || self.bodies.iter().zip(&self.bound).any(|(b, s)| {
+                let mid = 0.5 * (b.x0 + b.x);
+                (mid - s.truncate()).length() + b.r + 0.5 * (b.x - b.x0).length() > s.w
+            });
+        if strayed {
+            self.bound.clear();
+            self.bound.extend(self.bodies.iter().map(|b| {
+                let tol = crate::narrow::touch_tolerance(p.tolerance, b.r, b.x);
+                (0.5 * (b.x0 + b.x)).extend(b.r + 0.5 * (b.x - b.x0).length() + tol)
+            }));
+            self.grid.build(&self.bound);
+            self.candidates.clear();
+            let (candidates, grid, bound) = (&mut self.candidates, &self.grid, &self.bound);
+            grid.pairs(bound, |i, j| candidates.push((i.min(j), i.max(j))));
+        }
+        self.rows.clear();
+        let mut any = false;
+        for &(i, j) in &self.candidates {
+            if let Some(mut row) = narrow(&self.bodies, i, j, p) {
+                if row.kind == Found::Impact {
+                    // An impact that leaves the pair overlapping by less than a small
+                    // share of the radius is left to the next substep's contact stage,
+                    // which judges it on the same closing speed; resolving it here would
+                    // move a settled pile for nothing.
+                    let (a, b) = (&self.bodies[i as usize], &self.bodies[j as usize]);
+                    // Measured along the impact normal: a pair that passed through each
+                    // other is deep, however far apart it ends.
+                    let overlap = a.r + b.r - (b.x - a.x).dot(row.n);
+                    if overlap < DISCRETE_OVERLAP * a.r.min(b.r) {
+                        row.limit = f32::INFINITY;
+                    } else {
+                        any |= row.u < 0.0;
+                    }
+                }
+                if row.kind != Found::End {
+                    self.rows.push(row);
+                }
+            }
+        }
+        if !any {
+            return;
+        }
+        if self.collide(p, true) {
             // Collisions moved marbles off their free paths; what they run into there is
             // found and resolved in a few rounds.
             for _ in 0..LATE_ROUNDS {
@@ -498,29 +629,18 @@ impl PairSolver {
                 }
             }
         }
-        // 4. Contacts.
-        self.contacts(p);
-        // 5. Overlap.
-        self.project();
-        // Record.
         for row in &self.rows {
-            let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
-            let d = b.x - a.x;
-            let depth = a.r + b.r - d.length();
-            if !row.collided && depth < -row.tol {
+            if !row.collided || row.kind == Found::Start {
                 continue;
             }
+            let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
             out.list.push(MarbleContact {
                 a: a.entity,
                 b: b.entity,
                 normal: row.n,
-                depth,
+                depth: a.r + b.r - (b.x - a.x).length(),
                 closing_speed: row.u,
-                kind: if row.collided {
-                    ContactKind::Collision
-                } else {
-                    ContactKind::Contact
-                },
+                kind: ContactKind::Collision,
                 time: row.t,
             });
         }
@@ -534,6 +654,8 @@ impl PairSolver {
         let touches = self.board_touches.len().max(4 * n);
         self.rows.reserve(pairs);
         self.known.reserve(pairs);
+        self.candidates.reserve(2 * pairs);
+        self.entities.reserve(n);
         self.late.reserve(pairs);
         self.first.reserve(pairs);
         self.adjacency.reserve(2 * pairs);
@@ -556,11 +678,11 @@ impl PairSolver {
     /// cascade drives into a board it touches bounces off that board in turn (the board's
     /// restitution, the board not moving), so the cascade never pushes a marble into a floor.
     /// Returns whether any marble collided.
-    fn collide(&mut self, p: &PairParams) -> bool {
+    fn collide(&mut self, p: &PairParams, shift: bool) -> bool {
         let n = self.bodies.len();
         self.first.clear();
         for (k, row) in self.rows.iter().enumerate() {
-            if row.u < -p.threshold {
+            if row.u < -row.limit {
                 self.first.push(k as u32);
             }
         }
@@ -605,6 +727,7 @@ impl PairSolver {
         let mut budget = 8 * (rows.len() + self.board_touches.len()) + 64;
         let mut c = Cascade {
             p,
+            shift,
             rows,
             bodies: &mut self.bodies,
             touches: &self.board_touches,
@@ -699,8 +822,9 @@ impl PairSolver {
                             u: (b.v - a.v).dot(n),
                             t,
                             e: 0.5 * (a.e + b.e),
-                            tol,
                             k: 1.0 / (a.w + b.w),
+                            limit: p.threshold,
+                            kind: Found::Impact,
                             collided: false,
                         });
                     }
@@ -732,35 +856,21 @@ impl PairSolver {
     }
 
     /// Step 4 of the module docs: sequential impulses over every touching pair and the
-    /// board contacts of their marbles, warm started.
-    fn contacts(&mut self, p: &PairParams) {
+    /// board contacts of their marbles, warm started, on the velocities the marbles would
+    /// reach at the end of the substep; the impulses become forces over the substep
+    /// (added to `a`), so every integrator moves the marbles consistently with them.
+    fn solve_contacts(&mut self, p: &PairParams) {
         let n = self.bodies.len();
         self.constraints.clear();
         self.in_contact.clear();
         self.in_contact.resize(n, false);
-        let reach = p.position_share * p.h;
         for row in &self.rows {
             let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
-            let d = b.x - a.x;
-            let dist = d.length();
-            let normal = if dist > 0.0 { d / dist } else { row.n };
-            let gap = dist - (a.r + b.r);
-            // Touching pairs must not approach. A pair still apart must not be pushed
-            // together by more than its gap: the velocity changes of this solve also move
-            // the marbles (by `reach` per m/s), and that must not make them overlap.
-            let target = if gap <= row.tol {
-                0.0
-            } else if reach > 0.0 {
-                (b.v - a.v).dot(normal) - gap / reach
-            } else {
-                continue;
-            };
             let (ka, kb) = (a.entity.to_bits(), b.entity.to_bits());
             self.constraints.push(Constraint {
-                target,
                 i: row.i,
                 j: row.j,
-                n: normal,
+                n: row.n,
                 vb: Vec3::ZERO,
                 p: Vec3::ZERO,
                 k: row.k,
@@ -768,18 +878,15 @@ impl PairSolver {
                 slop: PAIR_SLOP * a.r.min(b.r),
                 key: (ka.min(kb), ka.max(kb)),
             });
-            if gap <= row.tol {
-                self.in_contact[row.i as usize] = true;
-                self.in_contact[row.j as usize] = true;
-            }
+            self.in_contact[row.i as usize] = true;
+            self.in_contact[row.j as usize] = true;
         }
         for t in &self.board_touches {
-            if !self.in_contact[t.body as usize] && !self.changed[t.body as usize] {
+            if !self.in_contact[t.body as usize] {
                 continue;
             }
             let b = &self.bodies[t.body as usize];
             self.constraints.push(Constraint {
-                target: 0.0,
                 i: t.body,
                 j: u32::MAX,
                 n: t.normal,
@@ -793,12 +900,13 @@ impl PairSolver {
                 key: (b.entity.to_bits(), !t.piece.0),
             });
         }
-        if self.constraints.is_empty() {
-            self.warm.clear();
-            return;
+        let h = p.h;
+        // From here on `v` is the velocity each marble would reach at the end of the
+        // substep without contact forces, `v0` its velocity at the start.
+        for b in self.bodies.iter_mut() {
+            b.v0 = b.v;
+            b.v += b.a * h;
         }
-        self.v_before.clear();
-        self.v_before.extend(self.bodies.iter().map(|b| b.v));
         let bodies = &mut self.bodies;
         // Warm start.
         for c in self.constraints.iter_mut() {
@@ -812,7 +920,7 @@ impl PairSolver {
             let mut largest = 0.0f32;
             for c in self.constraints.iter_mut() {
                 let u = closing(bodies, c);
-                let lambda = (c.lambda + (c.target - u) * c.k).max(0.0);
+                let lambda = (c.lambda - u * c.k).max(0.0);
                 let d = lambda - c.lambda;
                 if d != 0.0 {
                     c.lambda = lambda;
@@ -831,15 +939,15 @@ impl PairSolver {
             }
         }
         std::mem::swap(&mut self.warm, &mut self.warm_next);
-        // The impulses stand for forces over the substep: the positions move with them as
-        // the integrator moves a marble under a force.
-        let share = p.position_share * p.h;
+        // The impulses are forces over the substep.
         for (k, b) in bodies.iter_mut().enumerate() {
-            let dv = b.v - self.v_before[k];
+            let free = b.v0 + b.a * h;
+            let dv = b.v - free;
             if dv != Vec3::ZERO {
-                b.x += share * dv;
+                b.a += dv / h;
                 self.changed[k] = true;
             }
+            b.v = b.v0;
         }
     }
 
@@ -887,6 +995,9 @@ impl PairSolver {
 /// The state of the collision cascade (module docs, step 3).
 struct Cascade<'a> {
     p: &'a PairParams,
+    /// Move marbles for the time left after each impact (impacts inside the substep,
+    /// after integration); off for impacts at the substep's start, before integration.
+    shift: bool,
     rows: &'a mut [Row],
     bodies: &'a mut [Body],
     touches: &'a [BoardTouch],
@@ -906,7 +1017,7 @@ impl Cascade<'_> {
         let row = &mut self.rows[k];
         let (i, j) = (row.i as usize, row.j as usize);
         let u = row.u + (self.dv[j] - self.dv[i]).dot(row.n);
-        if u >= -self.p.threshold {
+        if u >= -row.limit {
             return;
         }
         let t = row.t.max(self.event[i]).max(self.event[j]);
@@ -914,10 +1025,12 @@ impl Cascade<'_> {
         let (wi, wj) = (self.bodies[i].w, self.bodies[j].w);
         self.dv[i] -= impulse * wi * row.n;
         self.dv[j] += impulse * wj * row.n;
-        // The marbles leave the impact with their new velocities.
-        let rest = self.p.h - t;
-        self.bodies[i].x -= (impulse * wi * rest) * row.n;
-        self.bodies[j].x += (impulse * wj * rest) * row.n;
+        if self.shift {
+            // The marbles leave the impact with their new velocities.
+            let rest = self.p.h - t;
+            self.bodies[i].x -= (impulse * wi * rest) * row.n;
+            self.bodies[j].x += (impulse * wj * rest) * row.n;
+        }
         self.event[i] = t;
         self.event[j] = t;
         row.collided = true;
@@ -938,7 +1051,9 @@ impl Cascade<'_> {
             if u < -self.p.threshold {
                 let change = -(1.0 + t.restitution) * u * t.normal;
                 self.dv[b] += change;
-                self.bodies[b].x += change * (self.p.h - self.event[b]);
+                if self.shift {
+                    self.bodies[b].x += change * (self.p.h - self.event[b]);
+                }
                 hit = true;
             }
         }
@@ -990,21 +1105,27 @@ fn narrow(bodies: &[Body], i: u32, j: u32, p: &PairParams) -> Option<Row> {
         let l = d.length();
         if l > 0.0 { d / l } else { fallback }
     };
-    let row = |n: Vec3, u: f32, t: f32| Row {
-        i,
-        j,
-        n,
-        u,
-        t,
-        e,
-        tol,
-        k,
-        collided: false,
+    let row = |n: Vec3, u: f32, t: f32, kind: Found| {
+        // A pair meeting slower than the threshold is a contact: its approach is removed
+        // at the impact (restitution 0), as on boards.
+        let slow = kind == Found::Impact && u >= -p.threshold;
+        Row {
+            i,
+            j,
+            n,
+            u,
+            t,
+            e: if slow { 0.0 } else { e },
+            k,
+            limit: if slow { 0.0 } else { p.threshold },
+            kind,
+            collided: false,
+        }
     };
     if l0 - reach <= tol {
         // Touching at the start: judged before this step's forces.
-        let n = unit(d1, unit(d0, Vec3::Y));
-        return Some(row(n, (b.v0 - a.v0).dot(n), 0.0));
+        let n = unit(d0, unit(d1, Vec3::Y));
+        return Some(row(n, (b.v0 - a.v0).dot(n), 0.0, Found::Start));
     }
     let l1 = d1.length();
     if p.ccd {
@@ -1020,14 +1141,14 @@ fn narrow(bodies: &[Body], i: u32, j: u32, p: &PairParams) -> Option<Row> {
                 if tau <= 1.0 {
                     let n = unit(d0 + m * tau, d0 / l0);
                     let v_rel = (b.v0 - a.v0).lerp(b.v - a.v, tau);
-                    return Some(row(n, v_rel.dot(n), tau * p.h));
+                    return Some(row(n, v_rel.dot(n), tau * p.h, Found::Impact));
                 }
             }
         }
     }
     if l1 - reach <= tol {
         let n = unit(d1, d0 / l0);
-        return Some(row(n, (b.v0 - a.v0).dot(n), p.h));
+        return Some(row(n, (b.v0 - a.v0).dot(n), p.h, Found::End));
     }
     None
 }

@@ -91,7 +91,8 @@ const POUR_LAYERS: usize = 10;
 /// start in ten layers on a lattice 2.2 radii apart, each nudged sideways by up to 0.1 r
 /// (a fixed pseudo-random pattern, so that they fall into a packing rather than balance
 /// in columns), over a square box just wide enough for them; they fall, collide, and
-/// settle into a pile. dt = 1/60 s in 8 substeps, restitution 0.5, marble collisions on.
+/// settle into a pile. dt = 1/60 s in 8 substeps, 30 solver passes, restitution 0.5,
+/// marble collisions on.
 pub fn pour_box(n: usize) -> Scene {
     let r = crate::components::DEFAULT_RADIUS;
     let spacing = 2.2 * r;
@@ -124,8 +125,11 @@ pub fn pour_box(n: usize) -> Scene {
         dt: 1.0 / 60.0,
         // A dense pile at 1/60 s needs substeps: in one 1/60 s step a marble falls a third
         // of its radius, and a crash of ten layers then leaves overlaps the solver cannot
-        // take out; at 1/480 s the pile settles with overlaps under 1% of the radius.
+        // take out; at 1/480 s with 30 solver passes the pile settles to under 1 mm/s with
+        // overlaps under 0.3% of the radius (measured; 10 passes leave surface marbles
+        // sliding at up to 5 cm/s).
         substeps: 8,
+        solver_iterations: 30,
         duration: 5.0,
         marble_collisions: true,
         boards: vec![board],

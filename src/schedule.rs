@@ -19,6 +19,9 @@ pub enum MarbleSystems {
     PrepareBoards,
     /// Gravity plus user forces → acceleration.
     AccumulateForces,
+    /// Marble–marble contacts: collisions of touching pairs, contact forces, overlap
+    /// (only with `marble_collisions` on).
+    MarbleContacts,
     /// Free motion with the chosen integrator.
     Integrate,
     /// Touches (collision or contact), first impact, or end overlap.
@@ -47,6 +50,7 @@ pub fn substep_schedule() -> Schedule {
         (
             MarbleSystems::PrepareBoards,
             MarbleSystems::AccumulateForces,
+            MarbleSystems::MarbleContacts,
             MarbleSystems::Integrate,
             MarbleSystems::DetectContacts,
             MarbleSystems::Respond,
@@ -68,6 +72,9 @@ pub fn substep_schedule() -> Schedule {
         )
             .chain()
             .in_set(MarbleSystems::Respond),
+        collide::marble_contacts
+            .run_if(|c: Res<StepConfig>| c.marble_collisions)
+            .in_set(MarbleSystems::MarbleContacts),
         collide::collide_marbles
             .run_if(|c: Res<StepConfig>| c.marble_collisions)
             .in_set(MarbleSystems::CollideMarbles),

@@ -1,18 +1,124 @@
-//! Marble–marble collisions and contacts ([`crate::pairs`]).
+//! Marble–marble contacts and impacts ([`crate::pairs`]): one system before integration
+//! (touching pairs: collisions at the start, contact forces, overlap) and one after the
+//! marble–board response (pairs that meet during the substep).
 
 use bevy_ecs::prelude::*;
+use glam::Vec3;
 
 use crate::components::{
-    Contacts, Marble, Mass, Position, PositionCarry, Quarantined, Radius, Restitution, StepStart,
-    Velocity, compensated_add,
+    Acceleration, Contacts, Marble, Mass, Position, PositionCarry, Quarantined, Radius,
+    Restitution, StepStart, Velocity, compensated_add,
 };
 use crate::config::StepConfig;
 use crate::narrow::BoardCache;
 use crate::pairs::{BoardTouch, Body, MarbleContacts, PairParams, PairSolver};
 
-/// Runs the pair stage of [`crate::pairs`] over every marble: gathers the marbles' end
-/// state and board contacts, solves, and writes back the marbles it changed. Runs only
+fn params(config: &StepConfig, h: f32) -> PairParams {
+    PairParams {
+        h,
+        ccd: config.ccd,
+        threshold: config.restitution_threshold,
+        tolerance: config.contact_tolerance,
+        iterations: config.solver_iterations,
+    }
+}
+
+/// Copies a marble's board contacts (recorded during a substep of length `h`) into the
+/// solver, the contact point carried with the board to the end of that substep, and the
+/// board's velocity there taken at time `at` of the current substep.
+fn board_touches(
+    solver: &mut PairSolver,
+    cache: &BoardCache,
+    body: u32,
+    contacts: &Contacts,
+    restitution: f32,
+    h: f32,
+    at: f32,
+) {
+    solver.touch_start.push(solver.board_touches.len() as u32);
+    for c in contacts.iter() {
+        let Some(board) = cache.boards.get(c.piece.board()) else {
+            continue;
+        };
+        let point = c.point + board.point_velocity(c.time, c.point) * (h - c.time);
+        solver.board_touches.push(BoardTouch {
+            body,
+            normal: c.normal,
+            point,
+            velocity: board.point_velocity(at, point),
+            piece: c.piece,
+            restitution: 0.5 * (restitution + board.restitution),
+        });
+    }
+}
+
+/// Before integration: the touching pairs of [`crate::pairs`] (collisions at the start,
+/// contact forces added to the marbles' acceleration, overlap projected out). Runs only
 /// with `marble_collisions` on.
+pub fn marble_contacts(
+    config: Res<StepConfig>,
+    cache: Res<BoardCache>,
+    mut solver: ResMut<PairSolver>,
+    mut recorded: ResMut<MarbleContacts>,
+    mut marbles: Query<
+        (
+            Entity,
+            (
+                &mut Position,
+                &mut PositionCarry,
+                &mut Velocity,
+                &mut Acceleration,
+            ),
+            (&Radius, &Mass, &Restitution, &Contacts),
+        ),
+        (With<Marble>, Without<Quarantined>),
+    >,
+) {
+    let h = cache.h;
+    let solver = solver.as_mut();
+    solver.bodies.clear();
+    solver.board_touches.clear();
+    solver.touch_start.clear();
+    for (entity, (position, _, velocity, acceleration), (radius, mass, restitution, contacts)) in
+        &marbles
+    {
+        let body = solver.bodies.len() as u32;
+        solver.bodies.push(Body {
+            entity,
+            x: position.0,
+            x0: position.0,
+            v: velocity.0,
+            v0: velocity.0,
+            w: mass.inverse(),
+            r: radius.0,
+            e: restitution.0,
+            a: acceleration.0,
+            d: config.integrator.delta(velocity.0, acceleration.0, h).0,
+        });
+        // The contacts were recorded during the last substep; its boards have since
+        // moved on to this substep's start.
+        board_touches(solver, &cache, body, contacts, restitution.0, h, 0.0);
+    }
+    solver.touch_start.push(solver.board_touches.len() as u32);
+    solver.contacts(&params(&config, h), &mut recorded);
+    for (k, (_, (mut position, mut carry, mut velocity, mut acceleration), _)) in
+        marbles.iter_mut().enumerate()
+    {
+        if !solver.changed[k] {
+            continue;
+        }
+        let body = &solver.bodies[k];
+        let moved = body.x - position.0;
+        if moved != Vec3::ZERO {
+            (position.0, carry.0) = compensated_add(config.compensated, position.0, carry.0, moved);
+        }
+        velocity.0 = body.v;
+        acceleration.0 = body.a;
+    }
+}
+
+/// After the marble–board response: pairs of [`crate::pairs`] that meet during the
+/// substep collide at their time of impact. Runs only with `marble_collisions` on.
 pub fn collide_marbles(
     config: Res<StepConfig>,
     cache: Res<BoardCache>,
@@ -35,7 +141,6 @@ pub fn collide_marbles(
     for (entity, (position, _, velocity), (start, radius, mass, restitution, contacts)) in &marbles
     {
         let body = solver.bodies.len() as u32;
-        solver.touch_start.push(solver.board_touches.len() as u32);
         solver.bodies.push(Body {
             entity,
             x: position.0,
@@ -45,40 +150,13 @@ pub fn collide_marbles(
             w: mass.inverse(),
             r: radius.0,
             e: restitution.0,
+            a: Vec3::ZERO,
+            d: Vec3::ZERO,
         });
-        for c in contacts.iter() {
-            let Some(board) = cache.boards.get(c.piece.board()) else {
-                continue;
-            };
-            let point = c.point + board.point_velocity(c.time, c.point) * (h - c.time);
-            solver.board_touches.push(BoardTouch {
-                body,
-                normal: c.normal,
-                point,
-                velocity: board.point_velocity(h, point),
-                piece: c.piece,
-                restitution: 0.5 * (restitution.0 + board.restitution),
-            });
-        }
+        board_touches(solver, &cache, body, contacts, restitution.0, h, h);
     }
-    // Displacement per unit of velocity change and second, for a velocity changed evenly
-    // over the substep by a constant force: dx / (a h²).
     solver.touch_start.push(solver.board_touches.len() as u32);
-    let share = config
-        .integrator
-        .delta(glam::Vec3::ZERO, glam::Vec3::X, h)
-        .0
-        .x
-        / (h * h).max(f32::MIN_POSITIVE);
-    let params = PairParams {
-        h,
-        ccd: config.ccd,
-        threshold: config.restitution_threshold,
-        tolerance: config.contact_tolerance,
-        iterations: config.solver_iterations,
-        position_share: share,
-    };
-    solver.solve(&params, &mut recorded);
+    solver.impacts(&params(&config, h), &mut recorded);
     for (k, (_, (mut position, mut carry, mut velocity), _)) in marbles.iter_mut().enumerate() {
         if !solver.changed[k] {
             continue;
