@@ -42,6 +42,9 @@ pub enum MarbleSystems {
 /// bevy_ecs's `multi_threaded` feature; the stages are a chain either way).
 pub fn substep_schedule() -> Schedule {
     let mut schedule = Schedule::new(MarbleSubstep);
+    // The stages are one chain: a multi-threaded executor would only add overhead.
+    // Parallelism, with the `parallel` feature, is inside the per-marble systems.
+    schedule.set_executor(bevy_ecs::schedule::SingleThreadedExecutor::new());
     schedule.set_build_settings(ScheduleBuildSettings {
         ambiguity_detection: LogLevel::Error,
         ..Default::default()
@@ -94,6 +97,10 @@ pub fn substep_schedule() -> Schedule {
 
 /// Inserts the resources the substep schedule needs, keeping any already present.
 pub fn init_resources(world: &mut World) {
+    // The per-marble stages run on the compute task pool with the `parallel` feature; a
+    // Bevy app's `TaskPoolPlugin` sets it up, a headless world gets one here.
+    #[cfg(feature = "parallel")]
+    bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
     world.init_resource::<StepConfig>();
     world.init_resource::<SubstepCounter>();
     world.init_resource::<crate::narrow::BoardCache>();

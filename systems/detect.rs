@@ -33,12 +33,19 @@ pub fn detect_contacts(
 ) {
     let boards = cache.boards.as_slice();
     let h = cache.h;
-    let mut touches = TouchList::default();
-    for (position, start, acceleration, radius, restitution, mut contacts) in &mut marbles {
+    let each = |touches: &mut TouchList,
+                (position, start, acceleration, radius, restitution, mut contacts): (
+        &Position,
+        &StepStart,
+        &Acceleration,
+        &Radius,
+        &Restitution,
+        Mut<Contacts>,
+    )| {
         let contacts = contacts.bypass_change_detection();
         contacts.clear();
         if boards.is_empty() {
-            continue;
+            return;
         }
         let r = radius.0;
         let tol = touch_tolerance(config.contact_tolerance, r, start.position);
@@ -53,7 +60,7 @@ pub fn detect_contacts(
                 ..Material::default()
             },
             -start.velocity,
-            &mut touches,
+            touches,
         );
         if !touches.is_empty() {
             for tc in touches.as_slice() {
@@ -83,7 +90,7 @@ pub fn detect_contacts(
                 v: start.velocity + config.integrator.velocity_offset(acceleration.0, h),
                 a: acceleration.0,
             };
-            if let Some((tau, _)) = earliest_impact(boards, &path, h, r, tol, &touches) {
+            if let Some((tau, _)) = earliest_impact(boards, &path, h, r, tol, touches) {
                 contacts.pending = Pending::Impact(tau);
             }
         } else {
@@ -99,11 +106,22 @@ pub fn detect_contacts(
                     ..Material::default()
                 },
                 -start.velocity,
-                &mut touches,
+                touches,
             );
             if touches.as_slice().iter().any(|t| t.gap < 0.0) {
                 contacts.pending = Pending::Overlap;
             }
+        }
+    };
+    #[cfg(feature = "parallel")]
+    marbles
+        .par_iter_mut()
+        .for_each_init(TouchList::default, each);
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut touches = TouchList::default();
+        for item in &mut marbles {
+            each(&mut touches, item);
         }
     }
 }

@@ -29,7 +29,13 @@ pub fn integrate(
     let h = cache.h;
     let integrator = config.integrator;
     let compensated = config.compensated;
-    for (mut position, mut carry, mut velocity, acceleration, mut start) in &mut marbles {
+    let each = |(mut position, mut carry, mut velocity, acceleration, mut start): (
+        Mut<Position>,
+        Mut<PositionCarry>,
+        Mut<Velocity>,
+        &Acceleration,
+        Mut<StepStart>,
+    )| {
         *start = StepStart {
             position: position.0,
             carry: carry.0,
@@ -38,5 +44,9 @@ pub fn integrate(
         let (dx, dv) = integrator.delta(velocity.0, acceleration.0, h);
         (position.0, carry.0) = compensated_add(compensated, position.0, carry.0, dx);
         velocity.0 += dv;
-    }
+    };
+    #[cfg(feature = "parallel")]
+    marbles.par_iter_mut().for_each(each);
+    #[cfg(not(feature = "parallel"))]
+    marbles.iter_mut().for_each(each);
 }

@@ -34,12 +34,22 @@ pub fn respond(
 ) {
     let boards = cache.boards.as_slice();
     let params = SubstepParams::from_config(&config, cache.h);
-    let mut touches = TouchList::default();
-    for ((mut position, mut carry, mut velocity), (start, acceleration, radius, e, mut contacts)) in
-        &mut marbles
-    {
+    let each = |touches: &mut TouchList,
+                (
+        (mut position, mut carry, mut velocity),
+        (start, acceleration, radius, e, mut contacts),
+    ): (
+        (Mut<Position>, Mut<PositionCarry>, Mut<Velocity>),
+        (
+            &StepStart,
+            &Acceleration,
+            &Radius,
+            &Restitution,
+            Mut<Contacts>,
+        ),
+    )| {
         if contacts.pending == Pending::None {
-            continue;
+            return;
         }
         let marble = MarbleIn {
             x0: start.position,
@@ -52,10 +62,21 @@ pub fn respond(
                 ..Material::default()
             },
         };
-        let out = respond_one(boards, &params, &marble, &mut contacts, &mut touches);
+        let out = respond_one(boards, &params, &marble, &mut contacts, touches);
         (position.0, carry.0) =
             compensated_add(config.compensated, start.position, start.carry, out.d);
         velocity.0 = out.v;
+    };
+    #[cfg(feature = "parallel")]
+    marbles
+        .par_iter_mut()
+        .for_each_init(TouchList::default, each);
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut touches = TouchList::default();
+        for item in &mut marbles {
+            each(&mut touches, item);
+        }
     }
 }
 
@@ -87,15 +108,28 @@ pub fn respond_spinning(
 ) {
     let boards = cache.boards.as_slice();
     let params = SubstepParams::from_config(&config, cache.h);
-    let mut touches = TouchList::default();
-    for (
+    let each = |touches: &mut TouchList,
+                (
         (mut position, mut carry, mut velocity, mut spin),
         (start, acceleration, radius, mut contacts),
         (restitution, friction, rolling_resistance, spin_damping),
-    ) in &mut marbles
-    {
+    ): (
+        (
+            Mut<Position>,
+            Mut<PositionCarry>,
+            Mut<Velocity>,
+            Mut<AngularVelocity>,
+        ),
+        (&StepStart, &Acceleration, &Radius, Mut<Contacts>),
+        (
+            &Restitution,
+            &Friction,
+            Option<&RollingResistance>,
+            Option<&SpinDamping>,
+        ),
+    )| {
         if contacts.pending == Pending::None {
-            continue;
+            return;
         }
         let marble = MarbleIn {
             x0: start.position,
@@ -110,12 +144,23 @@ pub fn respond_spinning(
                 spin_damping: spin_damping.map_or(0.0, |c| c.0),
             },
         };
-        let out = respond_one(boards, &params, &marble, &mut contacts, &mut touches);
+        let out = respond_one(boards, &params, &marble, &mut contacts, touches);
         (position.0, carry.0) =
             compensated_add(config.compensated, start.position, start.carry, out.d);
         velocity.0 = out.v;
         if config.rolling {
             spin.0 = out.w;
+        }
+    };
+    #[cfg(feature = "parallel")]
+    marbles
+        .par_iter_mut()
+        .for_each_init(TouchList::default, each);
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut touches = TouchList::default();
+        for item in &mut marbles {
+            each(&mut touches, item);
         }
     }
 }

@@ -18,6 +18,46 @@ fn schedule_has_no_ambiguities() {
         .expect("no system-order ambiguities");
 }
 
+/// A hash of every marble's position and velocity bits.
+fn state_hash(sim: &Simulation) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for i in 0..sim.marbles().len() {
+        let (x, v) = sim.marble_state(i);
+        for f in x.to_array().into_iter().chain(v.to_array()) {
+            h ^= f.to_bits() as u64;
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    h
+}
+
+/// The three bench scenes, large enough that the `parallel` feature splits their
+/// per-marble stages across threads, give the same state bits with and without it: the
+/// hash pinned here is checked by CI in both builds (`cargo test --features parallel`).
+#[test]
+fn parallel_feature_is_bit_identical() {
+    const PINNED: u64 = 0x00d1_ab19_799f_c2e7;
+    let mut h = 0u64;
+    for (kind, n) in [
+        (scenes::BenchScene::WalledBoard, 4000),
+        (scenes::BenchScene::PourBox, 2000),
+        (scenes::BenchScene::Labyrinth, 4000),
+    ] {
+        let mut scene = kind.build(n);
+        scene.rolling = kind == scenes::BenchScene::Labyrinth;
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        for _ in 0..20 {
+            sim.step();
+        }
+        h = h.rotate_left(17) ^ state_hash(&sim);
+    }
+    assert_eq!(
+        h, PINNED,
+        "state hash {h:#x} (parallel: {})",
+        cfg!(feature = "parallel")
+    );
+}
+
 /// A hash of every marble's position and velocity bits after 600 steps of the default
 /// scene: identical across runs, and equal to the value pinned here. If a deliberate
 /// change to the physics moves it, run this test, check the change is intended, and
@@ -30,15 +70,7 @@ fn determinism_hash() {
         for _ in 0..600 {
             sim.step();
         }
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        for i in 0..sim.marbles().len() {
-            let (x, v) = sim.marble_state(i);
-            for f in x.to_array().into_iter().chain(v.to_array()) {
-                h ^= f.to_bits() as u64;
-                h = h.wrapping_mul(0x0100_0000_01b3);
-            }
-        }
-        h
+        state_hash(&sim)
     };
     let a = run();
     assert_eq!(a, run(), "two runs differ");
