@@ -484,7 +484,6 @@ pub struct PairSolver {
     /// Contact stage.
     constraints: Vec<Constraint>,
     in_contact: Vec<bool>,
-    v_before: Vec<Vec3>,
     warm: KeyMap,
     warm_next: KeyMap,
     /// Bodies whose state the stage changed.
@@ -650,27 +649,28 @@ impl PairSolver {
     /// others; rows count each pair once), so that stepping allocates nothing once the
     /// number of marbles stops growing.
     fn reserve(&mut self, n: usize, out: &mut MarbleContacts) {
-        let pairs = 8 * n + 64;
-        let touches = self.board_touches.len().max(4 * n);
+        // A settled pile has about 3 touching pairs and 6 candidate pairs per marble (a
+        // marble touches at most 12 others, each pair counted once); marbles touch a
+        // board or two at most, mostly none. Buffers that outgrow this grow once and stay.
+        let pairs = 4 * n + 64;
+        let touches = 2 * n;
         self.rows.reserve(pairs);
         self.known.reserve(pairs);
         self.candidates.reserve(2 * pairs);
         self.entities.reserve(n);
-        self.late.reserve(pairs);
-        self.first.reserve(pairs);
+        self.late.reserve(n);
+        self.first.reserve(n);
         self.adjacency.reserve(2 * pairs);
-        self.queue.reserve(4 * pairs);
+        self.queue.reserve(pairs);
         self.constraints.reserve(pairs + touches);
         self.warm.reserve(pairs + touches);
         self.warm_next.reserve(pairs + touches);
         out.list.reserve(pairs);
-        self.board_touches
-            .reserve(crate::components::MAX_CONTACTS * n);
+        self.board_touches.reserve(touches);
         self.adjacency_start.reserve(n + 1);
         self.dv.reserve(n);
         self.event.reserve(n);
         self.in_contact.reserve(n);
-        self.v_before.reserve(n);
         self.reserved_for = n;
     }
 
