@@ -271,6 +271,11 @@ type KeyMap = HashMap<(u64, u64), f32, BuildHasherDefault<KeyHasher>>;
 struct Grid {
     cell: f32,
     mask: u32,
+    /// Dense mode: the lowest cell (less one in every axis) and the cell counts, when the
+    /// marbles' cells span few enough cells for one table entry per cell: neighbouring
+    /// cells are then neighbours in memory, and no two cells share a bucket. Otherwise
+    /// (`None`) cells are hashed.
+    dense: Option<(IVec3, IVec3)>,
     /// Bucket of each body.
     bucket: Vec<u32>,
     /// Start of each bucket in `order` (`mask + 2` entries).
@@ -303,6 +308,15 @@ const FORWARD: [IVec3; 13] = [
     IVec3::new(0, 0, 1),
 ];
 
+/// The cell of point `p` for cells of size `1 / inv`: `floor(p · inv)` per axis, without
+/// a call to libm's `floorf` (baseline x86-64 has no rounding instruction).
+#[inline]
+fn cell_of(p: Vec3, inv: f32) -> IVec3 {
+    let q = p * inv;
+    let t = q.as_ivec3();
+    t - IVec3::from(t.as_vec3().cmpgt(q))
+}
+
 #[inline]
 fn hash_cell(c: IVec3) -> u32 {
     (c.x as u32).wrapping_mul(0x8da6_b343)
@@ -331,7 +345,23 @@ impl Grid {
             .fold(0.0f32, f32::max);
         self.cell = (2.0 * largest).max(f32::MIN_POSITIVE);
         let inv = 1.0 / self.cell;
-        let table = (2 * n).next_power_of_two().max(16);
+        // The span of the ordinary marbles' cells, padded by one cell on every side so
+        // that every neighbour of an occupied cell has a table entry.
+        let (mut lo, mut hi) = (IVec3::MAX, IVec3::MIN);
+        for s in b.iter().filter(|s| s.w <= limit) {
+            let c = cell_of(s.truncate(), inv);
+            lo = lo.min(c);
+            hi = hi.max(c);
+        }
+        let dims = (hi - lo).as_i64vec3() + glam::I64Vec3::splat(3);
+        let cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
+        let table = if cells <= 8 * n as i64 + 64 {
+            self.dense = Some((lo - IVec3::ONE, dims.as_ivec3()));
+            cells as usize
+        } else {
+            self.dense = None;
+            (2 * n).next_power_of_two().max(16)
+        };
         self.mask = (table - 1) as u32;
         self.start.clear();
         self.start.resize(table + 1, 0);
@@ -341,10 +371,9 @@ impl Grid {
                 self.bucket.push(u32::MAX);
                 continue;
             }
-            let c = (s.truncate() * inv).floor().as_ivec3();
-            let h = hash_cell(c) & self.mask;
-            self.bucket.push(h);
-            self.start[h as usize + 1] += 1;
+            let h = self.bucket_of(cell_of(s.truncate(), inv));
+            self.bucket.push(h as u32);
+            self.start[h + 1] += 1;
         }
         for h in 0..table {
             self.start[h + 1] += self.start[h];
@@ -362,7 +391,7 @@ impl Grid {
             let slot = self.start[h as usize] as usize;
             self.start[h as usize] += 1;
             self.order[slot] = k as u32;
-            self.cells[slot] = (s.truncate() * inv).floor().as_ivec3();
+            self.cells[slot] = cell_of(s.truncate(), inv);
             self.bounds[slot] = *s;
         }
         for h in (1..=table).rev() {
@@ -371,10 +400,29 @@ impl Grid {
         self.start[0] = 0;
     }
 
+    /// The bucket of cell `c`: its index in the dense table, or its hash. In dense mode
+    /// a cell outside the padded span (only large marbles ask for those) has no marbles:
+    /// it maps to the padding cell `0`, which is always empty.
+    #[inline]
+    fn bucket_of(&self, c: IVec3) -> usize {
+        match self.dense {
+            Some((lo, dims)) => {
+                let d = c - lo;
+                if d.cmplt(IVec3::ZERO).any() || d.cmpge(dims).any() {
+                    0
+                } else {
+                    ((d.x as usize * dims.y as usize) + d.y as usize) * dims.z as usize
+                        + d.z as usize
+                }
+            }
+            None => (hash_cell(c) & self.mask) as usize,
+        }
+    }
+
     /// Entries of `order` in the bucket of cell `c`.
     #[inline]
     fn bucket_range(&self, c: IVec3) -> std::ops::Range<usize> {
-        let h = (hash_cell(c) & self.mask) as usize;
+        let h = self.bucket_of(c);
         self.start[h] as usize..self.start[h + 1] as usize
     }
 
@@ -493,13 +541,12 @@ pub struct PairSolver {
 }
 
 impl PairSolver {
-    /// The contact stage, before integration (module docs, steps 1–2 and 4–5), on
+    /// The contact stage, before integration (module docs, steps 1–2), on
     /// [`PairSolver::bodies`] at the substep's start (`x`, `v`, `a`, `d` set; `x0 = x`,
-    /// `v0 = v`) and [`PairSolver::board_touches`] (the previous substep's board contacts):
-    /// collisions of touching pairs become velocity changes at the start, contacts become
-    /// forces added to `a`, overlaps are projected out of `x`. Records the touching pairs
-    /// in `out` and keeps the candidate pairs for [`PairSolver::impacts`].
-    pub fn contacts(&mut self, p: &PairParams, out: &mut MarbleContacts) {
+    /// `v0 = v`): finds the touching pairs, keeps the candidate pairs for
+    /// [`PairSolver::find_impacts`], and returns whether any pair touches; then
+    /// [`PairSolver::solve_touching`] needs the board contacts.
+    pub fn find_touching(&mut self, p: &PairParams, out: &mut MarbleContacts) -> bool {
         out.list.clear();
         let n = self.bodies.len();
         if n > self.reserved_for {
@@ -532,8 +579,17 @@ impl PairSolver {
         }
         if self.rows.is_empty() {
             self.warm.clear();
-            return;
+            return false;
         }
+        true
+    }
+
+    /// The rest of the contact stage (module docs, steps 3–5), after
+    /// [`PairSolver::find_touching`] found touching pairs, with
+    /// [`PairSolver::board_touches`] (the previous substep's board contacts): collisions
+    /// of touching pairs become velocity changes at the start, contacts become forces added
+    /// to `a`, overlaps are projected out of `x`. Records the touching pairs in `out`.
+    pub fn solve_touching(&mut self, p: &PairParams, out: &mut MarbleContacts) {
         // 3. Collisions of touching pairs: velocity changes at the start.
         self.collide(p, false);
         // 4. Contacts: forces over the substep.
@@ -558,12 +614,12 @@ impl PairSolver {
         }
     }
 
-    /// The impact stage, after the marble–board response (module docs, step 3 for pairs
-    /// that were apart at the start), on [`PairSolver::bodies`] with `x0`, `v0` at the
-    /// substep's start and `x`, `v` at its end, and [`PairSolver::board_touches`] (this
-    /// substep's board contacts): pairs that meet during the substep collide at their
-    /// time of impact, exactly, and pass the impact on. Records the impacts in `out`.
-    pub fn impacts(&mut self, p: &PairParams, out: &mut MarbleContacts) {
+    /// The impact stage, after the marble–board response (module docs), on
+    /// [`PairSolver::bodies`] with `x0`, `v0` at the substep's start and `x`, `v` at its
+    /// end: finds the pairs that met during the substep deeply enough to collide now, and
+    /// returns whether there are any; then [`PairSolver::resolve_impacts`] needs the board
+    /// contacts.
+    pub fn find_impacts(&mut self, p: &PairParams) -> bool {
         let n = self.bodies.len();
         self.changed.clear();
         self.changed.resize(n, false);
@@ -616,9 +672,14 @@ impl PairSolver {
                 }
             }
         }
-        if !any {
-            return;
-        }
+        any
+    }
+
+    /// The rest of the impact stage, after [`PairSolver::find_impacts`] found impacts,
+    /// with [`PairSolver::board_touches`] (this substep's board contacts): the pairs
+    /// collide at their time of impact, exactly, and pass the impact on. Records the
+    /// impacts in `out`.
+    pub fn resolve_impacts(&mut self, p: &PairParams, out: &mut MarbleContacts) {
         if self.collide(p, true) {
             // Collisions moved marbles off their free paths; what they run into there is
             // found and resolved in a few rounds.
@@ -667,6 +728,7 @@ impl PairSolver {
         self.warm_next.reserve(pairs + touches);
         out.list.reserve(pairs);
         self.board_touches.reserve(touches);
+        self.touch_start.reserve(n + 1);
         self.adjacency_start.reserve(n + 1);
         self.dv.reserve(n);
         self.event.reserve(n);
@@ -1161,13 +1223,16 @@ mod tests {
     /// mixed sizes (some large) and random positions.
     #[test]
     fn grid_pairs_match_brute_force() {
+        let mut dense = 0;
         let mut seed = 12345u32;
         let mut rnd = move || {
             seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (seed >> 8) as f32 / (1u32 << 24) as f32
         };
-        for case in 0..20 {
-            let n = 50 + 30 * case;
+        // Spread wide (hashed cells) and packed (the dense table).
+        for case in 0..40 {
+            let spread = if case % 2 == 0 { 1.0 } else { 0.15 };
+            let n = 50 + 30 * (case / 2);
             let b: Vec<Vec4> = (0..n)
                 .map(|k| {
                     let r = if k % 37 == 0 {
@@ -1175,11 +1240,13 @@ mod tests {
                     } else {
                         0.01 + 0.01 * rnd()
                     };
-                    Vec4::new(rnd() - 0.5, 0.3 * rnd() - 0.5, rnd() - 0.5, r)
+                    let p = spread * (Vec3::new(rnd(), 0.3 * rnd(), rnd()) - 0.5);
+                    p.extend(r)
                 })
                 .collect();
             let mut grid = Grid::default();
             grid.build(&b);
+            dense += grid.dense.is_some() as usize;
             let mut found = Vec::new();
             grid.pairs(&b, |i, j| found.push((i.min(j), i.max(j))));
             let len = found.len();
@@ -1198,5 +1265,9 @@ mod tests {
             }
             assert_eq!(found, want, "case {case}");
         }
+        assert!(
+            dense > 0 && dense < 40,
+            "both modes exercised: {dense} dense"
+        );
     }
 }

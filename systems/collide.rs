@@ -75,14 +75,19 @@ pub fn marble_contacts(
     >,
 ) {
     let h = cache.h;
+    let params = params(&config, h);
     let solver = solver.as_mut();
     solver.bodies.clear();
-    solver.board_touches.clear();
-    solver.touch_start.clear();
     for (entity, (position, _, velocity, acceleration), (radius, mass, restitution, contacts)) in
         &marbles
     {
-        let body = solver.bodies.len() as u32;
+        // The free path the broad phase bounds: along the boards the marble rests or
+        // slides on, as the marble–board response will move it.
+        let (mut v, mut a) = (velocity.0, acceleration.0);
+        for c in contacts.iter() {
+            v -= v.dot(c.normal).min(0.0) * c.normal;
+            a -= a.dot(c.normal).min(0.0) * c.normal;
+        }
         solver.bodies.push(Body {
             entity,
             x: position.0,
@@ -93,14 +98,21 @@ pub fn marble_contacts(
             r: radius.0,
             e: restitution.0,
             a: acceleration.0,
-            d: config.integrator.delta(velocity.0, acceleration.0, h).0,
+            d: config.integrator.delta(v, a, h).0,
         });
+    }
+    if !solver.find_touching(&params, &mut recorded) {
+        return;
+    }
+    solver.board_touches.clear();
+    solver.touch_start.clear();
+    for (body, (_, _, (_, _, restitution, contacts))) in marbles.iter().enumerate() {
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
-        board_touches(solver, &cache, body, contacts, restitution.0, h, 0.0);
+        board_touches(solver, &cache, body as u32, contacts, restitution.0, h, 0.0);
     }
     solver.touch_start.push(solver.board_touches.len() as u32);
-    solver.contacts(&params(&config, h), &mut recorded);
+    solver.solve_touching(&params, &mut recorded);
     for (k, (_, (mut position, mut carry, mut velocity, mut acceleration), _)) in
         marbles.iter_mut().enumerate()
     {
@@ -134,13 +146,10 @@ pub fn collide_marbles(
     >,
 ) {
     let h = cache.h;
+    let params = params(&config, h);
     let solver = solver.as_mut();
     solver.bodies.clear();
-    solver.board_touches.clear();
-    solver.touch_start.clear();
-    for (entity, (position, _, velocity), (start, radius, mass, restitution, contacts)) in &marbles
-    {
-        let body = solver.bodies.len() as u32;
+    for (entity, (position, _, velocity), (start, radius, mass, restitution, _)) in &marbles {
         solver.bodies.push(Body {
             entity,
             x: position.0,
@@ -153,10 +162,17 @@ pub fn collide_marbles(
             a: Vec3::ZERO,
             d: Vec3::ZERO,
         });
-        board_touches(solver, &cache, body, contacts, restitution.0, h, h);
+    }
+    if !solver.find_impacts(&params) {
+        return;
+    }
+    solver.board_touches.clear();
+    solver.touch_start.clear();
+    for (body, (_, _, (_, _, _, restitution, contacts))) in marbles.iter().enumerate() {
+        board_touches(solver, &cache, body as u32, contacts, restitution.0, h, h);
     }
     solver.touch_start.push(solver.board_touches.len() as u32);
-    solver.impacts(&params(&config, h), &mut recorded);
+    solver.resolve_impacts(&params, &mut recorded);
     for (k, (_, (mut position, mut carry, mut velocity), _)) in marbles.iter_mut().enumerate() {
         if !solver.changed[k] {
             continue;

@@ -1,0 +1,25 @@
+//! Steps a bench scene for profiling: `cargo run --release --example profile_scene --
+//! SCENE N STEPS [collisions]`, e.g. `walled_board 10000 60 collisions`.
+use bevy_marble::prelude::*;
+use bevy_marble::scenes::BenchScene;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let kind = BenchScene::from_name(args.get(1).map_or("walled_board", |s| s)).expect("scene");
+    let n: usize = args.get(2).map_or(10_000, |s| s.parse().expect("N"));
+    let steps: usize = args.get(3).map_or(60, |s| s.parse().expect("STEPS"));
+    let mut scene = kind.build(n);
+    if let Some(c) = args.get(4) {
+        scene.marble_collisions = c == "collisions";
+    }
+    let mut sim = Simulation::from_scene(&scene).expect("valid scene");
+    let start = std::time::Instant::now();
+    for _ in 0..steps {
+        sim.step();
+    }
+    let ns = start.elapsed().as_nanos() as f64 / (steps * n) as f64;
+    println!(
+        "{} x {n}, {steps} steps: {ns:.0} ns per marble-step",
+        kind.name()
+    );
+}
