@@ -85,7 +85,7 @@ fn marble_collisions(c: &mut Criterion) {
             scenes::BenchScene::WalledBoard,
             &[1_000usize, 10_000, 100_000][..],
         ),
-        (scenes::BenchScene::PourBox, &[1_000, 10_000][..]),
+        (scenes::BenchScene::PourBox, &[1_000, 10_000, 100_000][..]),
         (scenes::BenchScene::Labyrinth, &[1_000, 10_000, 100_000][..]),
     ] {
         for &n in sizes {

@@ -39,7 +39,8 @@ const LABYRINTH_TILE: usize = 48;
 /// pattern (three baffles, 48 marbles dropped in an 8 × 6 grid) is tiled `k × k` times,
 /// `k = ⌈√(n / 48)⌉`, inside one walled board `0.4 k` metres wide that tilts about X
 /// through level (−0.1 rad to +0.1 rad over 10 s); tiles fill in order until `n` marbles
-/// are placed. Marbles collide with each other.
+/// are placed, 6–7 cm above the board's floor in its frame. Marbles collide with each
+/// other.
 pub fn labyrinth(n: usize) -> Scene {
     let tile = 0.4f32;
     let k = n.div_ceil(LABYRINTH_TILE).max(1).isqrt();
@@ -62,6 +63,9 @@ pub fn labyrinth(n: usize) -> Scene {
     board.rotation = [(tilt / 2.0).sin(), 0.0, 0.0, (tilt / 2.0).cos()];
     board.angular_velocity = [0.02, 0.0, 0.0];
     board.restitution = 0.6;
+    // Marbles are placed in the board's frame (above its tilted floor: on a large board
+    // the high side rises well above any fixed world height).
+    let pose = glam::Quat::from_array(board.rotation);
     let marbles = (0..n)
         .map(|m| {
             let (t, q) = (m / LABYRINTH_TILE, m % LABYRINTH_TILE);
@@ -69,7 +73,8 @@ pub fn labyrinth(n: usize) -> Scene {
             let (i, j) = (q / 6, q % 6);
             let x = -0.17 + 0.048 * i as f32;
             let z = -0.17 + 0.065 * j as f32 + 0.01;
-            let mut marble = MarbleDesc::at([cx + x, 0.06 + 0.004 * ((i + j) % 3) as f32, cz + z]);
+            let local = glam::Vec3::new(cx + x, 0.06 + 0.004 * ((i + j) % 3) as f32, cz + z);
+            let mut marble = MarbleDesc::at((pose * local).to_array());
             marble.restitution = 0.7;
             marble
         })
