@@ -56,8 +56,7 @@ fn main() {
                     half,
                 );
                 let theirs = world.stats(half);
-                for (engine, s, t) in [("bevy_marble", ours, t_sim), ("rapier", theirs, t_rapier)]
-                {
+                for (engine, s, t) in [("bevy_marble", ours, t_sim), ("rapier", theirs, t_rapier)] {
                     println!(
                         "| {} | {} | {} | {} | {} | {:.5} | {:.5} | {:.5} | {:.4} | {} | {} | {:.3} |",
                         kind.name(),

@@ -348,7 +348,9 @@ fn board_body(b: &BoardDesc) -> RigidBody {
 fn collider(shape: &ShapeDesc) -> Option<ColliderBuilder> {
     Some(match shape {
         ShapeDesc::Plane(_) => ColliderBuilder::new(SharedShape::halfspace(Vector::Y)),
-        ShapeDesc::Cuboid { half_extents: [x, y, z] } => ColliderBuilder::cuboid(*x, *y, *z),
+        ShapeDesc::Cuboid {
+            half_extents: [x, y, z],
+        } => ColliderBuilder::cuboid(*x, *y, *z),
         ShapeDesc::TriMesh { vertices, indices } => ColliderBuilder::trimesh(
             vertices.iter().map(|v| Vector::from_array(*v)).collect(),
             indices.clone(),
