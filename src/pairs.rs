@@ -12,10 +12,10 @@
 //! # The method
 //! Two stages per substep, both only with `marble_collisions` on.
 //!
-//! **Before integration** ([`PairSolver::contacts`], stage `MarbleContacts`), at the
-//! substep's start, where positions are consistent:
+//! **Before integration** ([`PairSolver::find_touching`], [`PairSolver::solve_touching`];
+//! stage `MarbleContacts`), at the substep's start, where positions are consistent:
 //!
-//! 1. **Broad phase: a hashed uniform grid**, linear in the number of marbles. Each marble
+//! 1. **Broad phase: a uniform grid**, linear in the number of marbles. Each marble
 //!    is bounded by the sphere around its free path over the substep (its integrator's
 //!    displacement under its acceleration, plus a margin). Cells are as wide as the largest
 //!    such sphere's diameter among the ordinary marbles (those at most twice the mean), so
@@ -45,8 +45,9 @@
 //!    positions, a share per pass (mass-weighted; boards do not move), without touching
 //!    velocities, so no energy is added for it.
 //!
-//! **After the marble–board response** ([`PairSolver::impacts`], stage `CollideMarbles`),
-//! with continuous collision: a pair that was apart at the start and met during the
+//! **After the marble–board response** ([`PairSolver::find_impacts`],
+//! [`PairSolver::resolve_impacts`]; stage `CollideMarbles`), with continuous collision: a
+//! pair that was apart at the start and met during the
 //! substep finds its time of impact along the relative path — linear, and exactly so for
 //! marbles in free flight under the same gravity — by the root of
 //! `|D₀ + (D₁ − D₀) τ| = r₁ + r₂`. If it would end overlapping by more than 5% of the
