@@ -230,6 +230,43 @@ struct Constraint {
     key: (u64, u64),
 }
 
+/// A pair row of the contact passes (compact copy of a [`Constraint`]).
+#[derive(Clone, Copy, Debug)]
+struct PairGs {
+    i: u32,
+    j: u32,
+    n: Vec3,
+    k: f32,
+    lambda: f32,
+}
+
+impl PairGs {
+    #[inline]
+    fn apply(&self, vel: &mut [Vec3], inv: &[f32], d: f32) {
+        let (i, j) = (self.i as usize, self.j as usize);
+        vel[i] -= (d * inv[i]) * self.n;
+        vel[j] += (d * inv[j]) * self.n;
+    }
+}
+
+/// A board row of the contact passes (compact copy of a [`Constraint`]).
+#[derive(Clone, Copy, Debug)]
+struct BoardGs {
+    i: u32,
+    n: Vec3,
+    vb: Vec3,
+    k: f32,
+    lambda: f32,
+}
+
+impl BoardGs {
+    #[inline]
+    fn apply(&self, vel: &mut [Vec3], inv: &[f32], d: f32) {
+        let i = self.i as usize;
+        vel[i] += (d * inv[i]) * self.n;
+    }
+}
+
 /// A board contact of one marble, copied from its [`crate::components::Contacts`].
 #[derive(Clone, Copy, Debug)]
 pub struct BoardTouch {
@@ -535,6 +572,10 @@ pub struct PairSolver {
     in_contact: Vec<bool>,
     warm: KeyMap,
     warm_next: KeyMap,
+    vel: Vec<Vec3>,
+    inv: Vec<f32>,
+    pair_gs: Vec<PairGs>,
+    board_gs: Vec<BoardGs>,
     /// Bodies whose state the stage changed.
     pub changed: Vec<bool>,
     /// Marble count the buffers were sized for.
@@ -725,6 +766,10 @@ impl PairSolver {
         self.adjacency.reserve(2 * pairs);
         self.queue.reserve(pairs);
         self.constraints.reserve(pairs + touches);
+        self.pair_gs.reserve(pairs);
+        self.board_gs.reserve(touches);
+        self.vel.reserve(n);
+        self.inv.reserve(n);
         self.warm.reserve(pairs + touches);
         self.warm_next.reserve(pairs + touches);
         out.list.reserve(pairs);
@@ -970,30 +1015,84 @@ impl PairSolver {
             b.v0 = b.v;
             b.v += b.a * h;
         }
-        let bodies = &mut self.bodies;
+        // The passes run on compact copies: velocities and inverse masses by body, and the
+        // pair and board rows apart (the same order as `constraints`: pairs, then boards),
+        // so that the inner loops are short and branch-free.
+        self.vel.clear();
+        self.vel.extend(self.bodies.iter().map(|b| b.v));
+        self.inv.clear();
+        self.inv.extend(self.bodies.iter().map(|b| b.w));
+        self.pair_gs.clear();
+        self.board_gs.clear();
+        for c in &self.constraints {
+            let lambda = self.warm.get(&c.key).copied().unwrap_or(0.0);
+            if c.j == u32::MAX {
+                self.board_gs.push(BoardGs {
+                    i: c.i,
+                    n: c.n,
+                    vb: c.vb,
+                    k: c.k,
+                    lambda,
+                });
+            } else {
+                self.pair_gs.push(PairGs {
+                    i: c.i,
+                    j: c.j,
+                    n: c.n,
+                    k: c.k,
+                    lambda,
+                });
+            }
+        }
+        let (vel, inv) = (&mut self.vel, &self.inv);
         // Warm start.
-        for c in self.constraints.iter_mut() {
-            let Some(&lambda) = self.warm.get(&c.key) else {
-                continue;
-            };
-            c.lambda = lambda;
-            apply(bodies, c, lambda);
+        for r in &self.pair_gs {
+            if r.lambda != 0.0 {
+                r.apply(vel, inv, r.lambda);
+            }
+        }
+        for r in &self.board_gs {
+            if r.lambda != 0.0 {
+                r.apply(vel, inv, r.lambda);
+            }
         }
         for _ in 0..p.iterations {
             let mut largest = 0.0f32;
-            for c in self.constraints.iter_mut() {
-                let u = closing(bodies, c);
-                let lambda = (c.lambda - u * c.k).max(0.0);
-                let d = lambda - c.lambda;
+            for r in self.pair_gs.iter_mut() {
+                let u = (vel[r.j as usize] - vel[r.i as usize]).dot(r.n);
+                let lambda = (r.lambda - u * r.k).max(0.0);
+                let d = lambda - r.lambda;
                 if d != 0.0 {
-                    c.lambda = lambda;
-                    apply(bodies, c, d);
-                    largest = largest.max(d.abs() / c.k);
+                    r.lambda = lambda;
+                    r.apply(vel, inv, d);
+                    largest = largest.max(d.abs() / r.k);
+                }
+            }
+            for r in self.board_gs.iter_mut() {
+                let u = (vel[r.i as usize] - r.vb).dot(r.n);
+                let lambda = (r.lambda - u * r.k).max(0.0);
+                let d = lambda - r.lambda;
+                if d != 0.0 {
+                    r.lambda = lambda;
+                    r.apply(vel, inv, d);
+                    largest = largest.max(d.abs() / r.k);
                 }
             }
             if largest < CONVERGED {
                 break;
             }
+        }
+        let lambdas = self
+            .pair_gs
+            .iter()
+            .map(|r| r.lambda)
+            .chain(self.board_gs.iter().map(|r| r.lambda));
+        for (c, lambda) in self.constraints.iter_mut().zip(lambdas) {
+            c.lambda = lambda;
+        }
+        let bodies = &mut self.bodies;
+        for (b, v) in bodies.iter_mut().zip(vel.iter()) {
+            b.v = *v;
         }
         self.warm_next.clear();
         for c in &self.constraints {
@@ -1123,32 +1222,6 @@ impl Cascade<'_> {
         if hit {
             self.queue.push(b as u32);
         }
-    }
-}
-
-/// Normal closing speed of a contact row (negative: approaching).
-#[inline]
-fn closing(bodies: &[Body], c: &Constraint) -> f32 {
-    let vi = bodies[c.i as usize].v;
-    if c.j == u32::MAX {
-        (vi - c.vb).dot(c.n)
-    } else {
-        (bodies[c.j as usize].v - vi).dot(c.n)
-    }
-}
-
-/// Applies the normal impulse `d` (N·s) of a contact row.
-#[inline]
-fn apply(bodies: &mut [Body], c: &Constraint, d: f32) {
-    let i = c.i as usize;
-    if c.j == u32::MAX {
-        let w = bodies[i].w;
-        bodies[i].v += (d * w) * c.n;
-    } else {
-        let j = c.j as usize;
-        let (wi, wj) = (bodies[i].w, bodies[j].w);
-        bodies[i].v -= (d * wi) * c.n;
-        bodies[j].v += (d * wj) * c.n;
     }
 }
 
