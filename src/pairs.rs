@@ -96,6 +96,10 @@ const BOUND_MARGIN: f32 = 0.1;
 /// the substep are resolved by the next substep's contact stage instead.
 const DISCRETE_OVERLAP: f32 = 0.05;
 
+/// Up to this many marbles moved by collisions are looked up one by one after collisions
+/// (and checked against each other directly); more, and every marble is paired again.
+const LATE_DIRECT: usize = 256;
+
 /// Rounds of looking for what collided marbles run into on their new paths.
 const LATE_ROUNDS: usize = 4;
 
@@ -464,6 +468,44 @@ impl Grid {
         self.start[h] as usize..self.start[h + 1] as usize
     }
 
+    /// Calls `f(j)` for every body whose bound sphere overlaps sphere `s` (centre, radius).
+    fn query(&self, b: &[Vec4], s: Vec4, mut f: impl FnMut(u32)) {
+        let near = |q: Vec4| {
+            let r = s.w + q.w;
+            (s.truncate() - q.truncate()).length_squared() <= r * r
+        };
+        let half = 0.5 * self.cell;
+        let inv = 1.0 / self.cell;
+        let lo = cell_of(s.truncate() - Vec3::splat(s.w + half), inv);
+        let hi = cell_of(s.truncate() + Vec3::splat(s.w + half), inv);
+        let span = (hi - lo + IVec3::ONE).as_vec3();
+        if (span.x * span.y * span.z) as f64 > self.order.len() as f64 {
+            for q in 0..self.order.len() {
+                if near(self.bounds[q]) {
+                    f(self.order[q]);
+                }
+            }
+        } else {
+            for x in lo.x..=hi.x {
+                for y in lo.y..=hi.y {
+                    for z in lo.z..=hi.z {
+                        let c = IVec3::new(x, y, z);
+                        for q in self.bucket_range(c) {
+                            if self.cells[q] == c && near(self.bounds[q]) {
+                                f(self.order[q]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        for &l in &self.large {
+            if near(b[l as usize]) {
+                f(l);
+            }
+        }
+    }
+
     /// Calls `f(i, j)` once for every pair of bodies whose bound spheres overlap.
     fn pairs(&self, b: &[Vec4], mut f: impl FnMut(u32, u32)) {
         let near = |p: Vec4, q: Vec4| {
@@ -559,6 +601,8 @@ pub struct PairSolver {
     dv: Vec<Vec3>,
     event: Vec<f32>,
     known: Vec<(u32, u32)>,
+    /// Bodies a collision moved off their free paths.
+    moved: Vec<u32>,
     candidates: Vec<(u32, u32)>,
     /// The bodies' entities when the candidates were found.
     entities: Vec<Entity>,
@@ -759,6 +803,7 @@ impl PairSolver {
         let touches = 2 * n;
         self.rows.reserve(pairs);
         self.known.reserve(pairs);
+        self.moved.reserve(n);
         self.candidates.reserve(2 * pairs);
         self.entities.reserve(n);
         self.late.reserve(n);
@@ -883,61 +928,59 @@ impl PairSolver {
     /// approach speed, no time left to move), every one is then a contact.
     /// Returns whether any marble collided.
     fn late_overlaps(&mut self, p: &PairParams) -> bool {
-        self.bound.clear();
-        self.bound.extend(self.bodies.iter().map(|b| {
-            b.x.extend(b.r + crate::narrow::touch_tolerance(p.tolerance, b.r, b.x))
-        }));
-        self.grid.build(&self.bound);
         self.known.clear();
         self.known.extend(self.rows.iter().map(|r| (r.i, r.j)));
         self.known.sort_unstable();
         self.late.clear();
+        self.moved.clear();
+        self.moved
+            .extend((0..self.bodies.len() as u32).filter(|&i| self.changed[i as usize]));
+        // The grid still bounds every marble's path over the substep, and a marble the
+        // cascade did not touch ends inside its bound: the moved marbles are looked up
+        // against it, and against each other directly. When too many moved for that,
+        // every marble is paired again on the end positions.
+        let few = self.moved.len() <= LATE_DIRECT;
+        if !few {
+            self.bound.clear();
+            self.bound.extend(self.bodies.iter().map(|b| {
+                b.x.extend(b.r + crate::narrow::touch_tolerance(p.tolerance, b.r, b.x))
+            }));
+            self.grid.build(&self.bound);
+        }
         {
-            let (bodies, known, late, event) =
-                (&self.bodies, &self.known, &mut self.late, &self.event);
-            self.grid.pairs(&self.bound, |i, j| {
+            let (bodies, known, late, event, changed) = (
+                &self.bodies,
+                &self.known,
+                &mut self.late,
+                &self.event,
+                &self.changed,
+            );
+            let mut check = |i: u32, j: u32| {
                 let (i, j) = (i.min(j), i.max(j));
-                if known.binary_search(&(i, j)).is_err() {
-                    let (a, b) = (&bodies[i as usize], &bodies[j as usize]);
-                    let d = b.x - a.x;
-                    let tol = crate::narrow::touch_tolerance(
-                        p.tolerance,
-                        a.r.min(b.r),
-                        a.x.abs().max(b.x.abs()),
-                    );
-                    if d.length() - (a.r + b.r) <= tol {
-                        // Back along the marbles' new straight paths to the later of
-                        // their last impacts, then forward to where they meet.
-                        let te = event[i as usize].max(event[j as usize]);
-                        let rest = p.h - te;
-                        let de = d - (b.v - a.v) * rest;
-                        let reach = a.r + b.r;
-                        let le = de.length();
-                        let m = d - de;
-                        let (t, n) = if le > reach && m.length_squared() > 0.0 {
-                            let half_b = de.dot(m);
-                            let c = (le - reach) * (le + reach);
-                            let disc = (half_b * half_b - m.length_squared() * c).max(0.0);
-                            let tau = (c / (-half_b + disc.sqrt())).clamp(0.0, 1.0);
-                            (te + tau * rest, (de + m * tau).normalize_or(Vec3::Y))
-                        } else {
-                            (te, d.normalize_or(Vec3::Y))
-                        };
-                        late.push(Row {
-                            i,
-                            j,
-                            n,
-                            u: (b.v - a.v).dot(n),
-                            t,
-                            e: 0.5 * (a.e + b.e),
-                            k: 1.0 / (a.w + b.w),
-                            limit: p.threshold,
-                            kind: Found::Impact,
-                            collided: false,
-                        });
+                if i == j || known.binary_search(&(i, j)).is_ok() {
+                    return;
+                }
+                if let Some(row) = late_row(bodies, event, i, j, p) {
+                    late.push(row);
+                }
+            };
+            if few {
+                for (m, &i) in self.moved.iter().enumerate() {
+                    let b = &bodies[i as usize];
+                    let tol = crate::narrow::touch_tolerance(p.tolerance, b.r, b.x);
+                    self.grid.query(&self.bound, b.x.extend(b.r + tol), |j| {
+                        // Pairs of moved marbles are checked below, once.
+                        if !changed[j as usize] {
+                            check(i, j);
+                        }
+                    });
+                    for &j in &self.moved[m + 1..] {
+                        check(i, j);
                     }
                 }
-            });
+            } else {
+                self.grid.pairs(&self.bound, &mut check);
+            }
         }
         let mut any = false;
         for row in self.late.iter_mut() {
@@ -1223,6 +1266,45 @@ impl Cascade<'_> {
             self.queue.push(b as u32);
         }
     }
+}
+
+/// A pair of marbles `i < j` that a collision sent into each other off their free paths,
+/// found overlapping (or touching) at the end of the substep: back along their new straight
+/// paths to the later of their last impacts, then forward to where they meet.
+fn late_row(bodies: &[Body], event: &[f32], i: u32, j: u32, p: &PairParams) -> Option<Row> {
+    let (a, b) = (&bodies[i as usize], &bodies[j as usize]);
+    let d = b.x - a.x;
+    let tol = crate::narrow::touch_tolerance(p.tolerance, a.r.min(b.r), a.x.abs().max(b.x.abs()));
+    if d.length() - (a.r + b.r) > tol {
+        return None;
+    }
+    let te = event[i as usize].max(event[j as usize]);
+    let rest = p.h - te;
+    let de = d - (b.v - a.v) * rest;
+    let reach = a.r + b.r;
+    let le = de.length();
+    let m = d - de;
+    let (t, n) = if le > reach && m.length_squared() > 0.0 {
+        let half_b = de.dot(m);
+        let c = (le - reach) * (le + reach);
+        let disc = (half_b * half_b - m.length_squared() * c).max(0.0);
+        let tau = (c / (-half_b + disc.sqrt())).clamp(0.0, 1.0);
+        (te + tau * rest, (de + m * tau).normalize_or(Vec3::Y))
+    } else {
+        (te, d.normalize_or(Vec3::Y))
+    };
+    Some(Row {
+        i,
+        j,
+        n,
+        u: (b.v - a.v).dot(n),
+        t,
+        e: 0.5 * (a.e + b.e),
+        k: 1.0 / (a.w + b.w),
+        limit: p.threshold,
+        kind: Found::Impact,
+        collided: false,
+    })
 }
 
 /// Step 2 of the module docs for bodies `i < j`: the pair's row, if they touch at the
