@@ -9,6 +9,14 @@ use bevy_marble::prelude::*;
 use bevy_marble::scenes;
 use clap::{Parser, Subcommand};
 
+/// Parses a bench scene's name for `marble scene --bench`.
+fn bench_scene(name: &str) -> Result<scenes::BenchScene, String> {
+    scenes::BenchScene::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = scenes::BenchScene::ALL.iter().map(|b| b.name()).collect();
+        format!("unknown bench scene {name:?}; one of {}", names.join(", "))
+    })
+}
+
 /// A marble-rolling physics engine: run, check and print scenes.
 #[derive(Parser, Debug)]
 #[command(name = "marble", version, about)]
@@ -26,8 +34,16 @@ enum Command {
         /// The scene file.
         scene: PathBuf,
     },
-    /// Print the built-in default scene as RON.
-    Scene,
+    /// Print the built-in default scene as RON, or one of the bench scenes.
+    Scene {
+        /// A bench scene instead: walled_board (a), pour_box (b) or labyrinth (c).
+        #[arg(long, value_name = "NAME", value_parser = bench_scene)]
+        bench: Option<scenes::BenchScene>,
+        /// Marbles in the bench scene.
+        #[arg(long, default_value_t = 1000, requires = "bench",
+              value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+        marbles: u64,
+    },
     /// The speed-versus-accuracy study: every integrator × dt × substeps × CCD on the
     /// reference scenes; a table on stdout, the table and one plot per scene in DIR.
     Tradeoff {
@@ -101,8 +117,12 @@ fn main() -> ExitCode {
                 s.marbles.len()
             );
         }),
-        Some(Command::Scene) => {
-            println!("{}", scenes::default_scene().to_ron_string());
+        Some(Command::Scene { bench, marbles }) => {
+            let scene = match bench {
+                Some(kind) => kind.build(marbles as usize),
+                None => scenes::default_scene(),
+            };
+            println!("{}", scene.to_ron_string());
             Ok(())
         }
         Some(Command::Tradeoff { out, quick }) => tradeoff(out, quick),

@@ -353,6 +353,29 @@ fn cli_check_scene_and_default_run() {
     assert!(dir.join("marble-out/default.svg").exists());
 }
 
+/// `marble scene --bench NAME --marbles N` prints the shared bench scenes (the same the
+/// benches and the rapier comparison use); a bad name or a missing `--bench` is exit 2.
+#[test]
+fn cli_prints_the_bench_scenes() {
+    let dir = temp_dir("bench_scenes");
+    for kind in scenes::BenchScene::ALL {
+        let o = marble(&["scene", "--bench", kind.name(), "--marbles", "60"], &dir);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = String::from_utf8(o.stdout).unwrap();
+        assert_eq!(
+            Scene::from_ron_str(&text).unwrap(),
+            kind.build(60),
+            "{}",
+            kind.name()
+        );
+    }
+    let o = marble(&["scene", "--bench", "nope"], &dir);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("unknown bench scene"), "{}", stderr(&o));
+    let o = marble(&["scene", "--marbles", "5"], &dir);
+    assert_eq!(o.status.code(), Some(2));
+}
+
 /// A preset in a scene file sets the integrator, CCD and the substeps its dt needs.
 #[test]
 fn presets_load_from_scene_files() {
