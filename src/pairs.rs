@@ -17,10 +17,12 @@
 //!
 //! 1. **Broad phase: a uniform grid**, linear in the number of marbles. Each marble
 //!    is bounded by the sphere around its free path over the substep (its integrator's
-//!    displacement under its acceleration, plus a margin). Cells are as wide as the largest
-//!    such sphere's diameter among the ordinary marbles (those at most twice the mean), so
-//!    two ordinary marbles can touch only in the same or adjacent cells; marbles are
-//!    counting-sorted by cell hash, and each cell is paired with itself and its 13
+//!    displacement under its acceleration, along the boards it rests or slides on, plus a
+//!    margin). Cells are as wide as the largest such sphere's diameter among the ordinary
+//!    marbles (those at most twice the mean), so two ordinary marbles can touch only in the
+//!    same or adjacent cells; marbles are counting-sorted by cell (one table entry per cell
+//!    when the occupied span is compact, so that neighbouring cells are neighbours in
+//!    memory; a hash of the cell otherwise), and each cell is paired with itself and its 13
 //!    "forward" neighbours (every neighbouring pair of cells once). The rare large or fast
 //!    marbles are paired through the cells their bound covers, or with every marble when
 //!    that is fewer. The grid was chosen over sweep-and-prune (marbles on a board share one
@@ -65,9 +67,10 @@
 //! and none adds energy. Marbles a collision sends off their free paths are checked, on the
 //! end positions, against marbles the broad phase did not pair with them (a few rounds).
 //!
-//! Piles need short substeps: at 1/60 s a marble falls a third of its radius per substep
-//! and a crash of many layers leaves overlaps the projection cannot take out; bench scene
-//! (b) uses 8 substeps and 30 solver passes (see the README's measurements).
+//! Piles need short substeps: the contact stage holds only pairs within the touching
+//! tolerance, and at 1/60 s a marble with a larger gap to its support falls a third of its
+//! radius into it in one substep; bench scene (b) uses 8 substeps and 30 solver passes
+//! (see the README's measurements). A soft-step solver is the known cure.
 //!
 //! Marble–marble contacts are smooth (no friction) even with rolling on.
 
