@@ -6,8 +6,8 @@ use bevy_ecs::prelude::*;
 use glam::Vec3;
 
 use crate::components::{
-    Acceleration, Contacts, Marble, Mass, Position, PositionCarry, Quarantined, Radius,
-    Restitution, StepStart, Velocity, compensated_add,
+    Acceleration, AngularVelocity, Contacts, Friction, Marble, Mass, Position, PositionCarry,
+    Quarantined, Radius, Restitution, StepStart, Velocity, compensated_add,
 };
 use crate::config::StepConfig;
 use crate::narrow::BoardCache;
@@ -70,6 +70,7 @@ pub fn marble_contacts(
                 &mut Acceleration,
             ),
             (&Radius, &Mass, &Restitution, &Contacts),
+            (Option<&mut AngularVelocity>, Option<&Friction>),
         ),
         (With<Marble>, Without<Quarantined>),
     >,
@@ -78,8 +79,12 @@ pub fn marble_contacts(
     let params = params(&config, h);
     let solver = solver.as_mut();
     solver.bodies.clear();
-    for (entity, (position, _, velocity, acceleration), (radius, mass, restitution, contacts)) in
-        &marbles
+    for (
+        entity,
+        (position, _, velocity, acceleration),
+        (radius, mass, restitution, contacts),
+        (spin, friction),
+    ) in &marbles
     {
         // The free path the broad phase bounds: along the boards the marble rests or
         // slides on, as the marble–board response will move it.
@@ -99,6 +104,9 @@ pub fn marble_contacts(
             e: restitution.0,
             a: acceleration.0,
             d: config.integrator.delta(v, a, h).0,
+            omega: spin.as_ref().map_or(Vec3::ZERO, |w| w.0),
+            spins: config.rolling && spin.is_some(),
+            mu: friction.map_or(0.0, |f| f.0),
         });
     }
     if !solver.find_touching(&params, &mut recorded) {
@@ -106,14 +114,14 @@ pub fn marble_contacts(
     }
     solver.board_touches.clear();
     solver.touch_start.clear();
-    for (body, (_, _, (_, _, restitution, contacts))) in marbles.iter().enumerate() {
+    for (body, (_, _, (_, _, restitution, contacts), _)) in marbles.iter().enumerate() {
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
         board_touches(solver, &cache, body as u32, contacts, restitution.0, h, 0.0);
     }
     solver.touch_start.push(solver.board_touches.len() as u32);
     solver.solve_touching(&params, &mut recorded);
-    for (k, (_, (mut position, mut carry, mut velocity, mut acceleration), _)) in
+    for (k, (_, (mut position, mut carry, mut velocity, mut acceleration), _, (spin, _))) in
         marbles.iter_mut().enumerate()
     {
         if !solver.changed[k] {
@@ -126,6 +134,11 @@ pub fn marble_contacts(
         }
         velocity.0 = body.v;
         acceleration.0 = body.a;
+        if body.spins
+            && let Some(mut spin) = spin
+        {
+            spin.0 = body.omega;
+        }
     }
 }
 
@@ -161,6 +174,9 @@ pub fn collide_marbles(
             e: restitution.0,
             a: Vec3::ZERO,
             d: Vec3::ZERO,
+            omega: Vec3::ZERO,
+            spins: false,
+            mu: 0.0,
         });
     }
     if !solver.find_impacts(&params) {

@@ -13,9 +13,10 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 
     /// A random cluster of 2–12 marbles in space (no gravity, no boards), random masses over
-    /// four decades, velocities, restitutions, some starting in contact or overlapping: every
-    /// step conserves the total momentum (to 1e-4 of the momentum scale, f32 rounding
-    /// summed over the cluster) and never raises the kinetic energy (1e-4 relative).
+    /// four decades, velocities, restitutions, spins (rolling on or off: marble–marble
+    /// friction), some starting in contact or overlapping: every step conserves the total
+    /// momentum (to 1e-4 of the momentum scale, f32 rounding summed over the cluster) and
+    /// never raises the kinetic energy, spin included (1e-4 relative).
     #[test]
     fn marble_marble_responses_conserve_momentum(
         marbles in proptest::collection::vec(
@@ -24,21 +25,25 @@ proptest! {
                 (-2.0f32..2.0, -2.0f32..2.0, -2.0f32..2.0),
                 -4.0f32..0.0,
                 0.0f32..=1.0,
+                (-50.0f32..50.0, -50.0f32..50.0, -50.0f32..50.0),
             ),
             2..12,
         ),
         dt_inv in 30.0f32..480.0,
+        rolling in any::<bool>(),
     ) {
         let mut scene = Scene {
             gravity: [0.0; 3],
             dt: 1.0 / dt_inv,
             marble_collisions: true,
+            rolling,
             ..Scene::default()
         };
         let mut masses = Vec::new();
-        for (x, v, log_m, e) in &marbles {
+        for (x, v, log_m, e, w) in &marbles {
             let mut m = MarbleDesc::at([x.0, x.1, x.2]);
             m.velocity = [v.0, v.1, v.2];
+            m.angular_velocity = [w.0, w.1, w.2];
             m.mass = Some(10f32.powf(*log_m));
             m.restitution = *e;
             masses.push(m.mass.unwrap());
@@ -53,6 +58,11 @@ proptest! {
                 let v = sim.marble_state(i).1;
                 p += *m * v;
                 k += 0.5 * *m as f64 * v.length_squared() as f64;
+                if rolling {
+                    // Spin energy, I = 2/5 m r².
+                    let w = sim.marble_spin(i);
+                    k += 0.2 * *m as f64 * (0.008f64 * 0.008) * w.length_squared() as f64;
+                }
                 scale += *m * v.length();
             }
             (p, k, scale)
