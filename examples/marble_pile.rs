@@ -1,0 +1,62 @@
+//! Pours marbles into a walled box (bench scene (b)) and reports how the pile settles:
+//! every half second, the fastest marble, how many move faster than 5 cm/s, the deepest
+//! marble–marble overlap and how many marbles touch each other; then the wall time.
+//!
+//! `cargo run --release --example marble_pile -- [MARBLES] [SUBSTEPS] [SOLVER_PASSES]`
+//! (defaults: 1000, the scene's 8 substeps and 30 passes). Try fewer substeps to see
+//! why the scene uses 8 (README, "Many marbles").
+
+use bevy_marble::prelude::*;
+use bevy_marble::scenes;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let arg = |i: usize| {
+        args.get(i)
+            .map(|s| s.parse::<u64>().expect("a whole number"))
+    };
+    let n = arg(1).unwrap_or(1000) as usize;
+    let mut scene = scenes::pour_box(n);
+    if let Some(substeps) = arg(2) {
+        scene.substeps = substeps as u32;
+    }
+    if let Some(passes) = arg(3) {
+        scene.solver_iterations = passes as u32;
+    }
+    let mut sim = Simulation::from_scene(&scene).expect("the bench scene is valid");
+    let r = scene.marbles[0].radius;
+    println!(
+        "{n} marbles, dt {:.4} s in {} substeps, {} solver passes",
+        scene.dt, scene.substeps, scene.solver_iterations
+    );
+    println!("  time | fastest m/s | > 5 cm/s | deepest overlap / r | touching pairs");
+    let steps = (6.0 / scene.dt).round() as u64;
+    let every = (0.5 / scene.dt).round() as u64;
+    let start = std::time::Instant::now();
+    for step in 1..=steps {
+        sim.step();
+        if step % every == 0 {
+            let speeds: Vec<f32> = (0..n).map(|i| sim.marble_state(i).1.length()).collect();
+            let fastest = speeds.iter().copied().fold(0.0, f32::max);
+            let moving = speeds.iter().filter(|&&v| v >= 0.05).count();
+            let contacts = sim.world().resource::<MarbleContacts>();
+            let deepest = contacts
+                .as_slice()
+                .iter()
+                .map(|c| c.depth)
+                .fold(0.0, f32::max);
+            println!(
+                "{:5.1} s | {fastest:11.4} | {moving:8} | {:19.4} | {}",
+                step as f32 * scene.dt,
+                deepest / r,
+                contacts.len()
+            );
+        }
+    }
+    let elapsed = start.elapsed();
+    println!(
+        "{:.2} s wall, {:.0} ns per marble-step",
+        elapsed.as_secs_f64(),
+        elapsed.as_nanos() as f64 / (steps as f64 * n as f64)
+    );
+}
