@@ -697,20 +697,7 @@ impl PairSolver {
         // 5. Overlap.
         self.project();
         for row in &self.rows {
-            let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
-            out.list.push(MarbleContact {
-                a: a.entity,
-                b: b.entity,
-                normal: row.n,
-                depth: a.r + b.r - (b.x - a.x).length(),
-                closing_speed: row.u,
-                kind: if row.collided {
-                    ContactKind::Collision
-                } else {
-                    ContactKind::Contact
-                },
-                time: 0.0,
-            });
+            out.list.push(self.contact(row));
         }
     }
 
@@ -790,19 +777,27 @@ impl PairSolver {
             }
         }
         for row in &self.rows {
-            if !row.collided || row.kind == Found::Start {
-                continue;
+            if row.collided && row.kind != Found::Start {
+                out.list.push(self.contact(row));
             }
-            let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
-            out.list.push(MarbleContact {
-                a: a.entity,
-                b: b.entity,
-                normal: row.n,
-                depth: a.r + b.r - (b.x - a.x).length(),
-                closing_speed: row.u,
-                kind: ContactKind::Collision,
-                time: row.t,
-            });
+        }
+    }
+
+    /// The record of a row: its pair, the end overlap, the closing speed judged and when.
+    fn contact(&self, row: &Row) -> MarbleContact {
+        let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
+        MarbleContact {
+            a: a.entity,
+            b: b.entity,
+            normal: row.n,
+            depth: a.r + b.r - (b.x - a.x).length(),
+            closing_speed: row.u,
+            kind: if row.collided {
+                ContactKind::Collision
+            } else {
+                ContactKind::Contact
+            },
+            time: row.t,
         }
     }
 

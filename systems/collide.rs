@@ -52,6 +52,21 @@ fn board_touches(
     }
 }
 
+/// Writes a body's position (by compensated summation of its move) and velocity back.
+fn write_back(
+    compensated: bool,
+    body: &Body,
+    position: &mut Position,
+    carry: &mut PositionCarry,
+    velocity: &mut Velocity,
+) {
+    let moved = body.x - position.0;
+    if moved != Vec3::ZERO {
+        (position.0, carry.0) = compensated_add(compensated, position.0, carry.0, moved);
+    }
+    velocity.0 = body.v;
+}
+
 /// Before integration: the touching pairs of [`crate::pairs`] (collisions at the start,
 /// contact forces added to the marbles' acceleration, overlap projected out). Runs only
 /// with `marble_collisions` on.
@@ -128,11 +143,13 @@ pub fn marble_contacts(
             continue;
         }
         let body = &solver.bodies[k];
-        let moved = body.x - position.0;
-        if moved != Vec3::ZERO {
-            (position.0, carry.0) = compensated_add(config.compensated, position.0, carry.0, moved);
-        }
-        velocity.0 = body.v;
+        write_back(
+            config.compensated,
+            body,
+            &mut position,
+            &mut carry,
+            &mut velocity,
+        );
         acceleration.0 = body.a;
         if body.spins
             && let Some(mut spin) = spin
@@ -193,9 +210,12 @@ pub fn collide_marbles(
         if !solver.changed[k] {
             continue;
         }
-        let body = &solver.bodies[k];
-        let moved = body.x - position.0;
-        (position.0, carry.0) = compensated_add(config.compensated, position.0, carry.0, moved);
-        velocity.0 = body.v;
+        write_back(
+            config.compensated,
+            &solver.bodies[k],
+            &mut position,
+            &mut carry,
+            &mut velocity,
+        );
     }
 }

@@ -113,15 +113,5 @@ pub fn detect_contacts(
             }
         }
     };
-    #[cfg(feature = "parallel")]
-    marbles
-        .par_iter_mut()
-        .for_each_init(TouchList::default, each);
-    #[cfg(not(feature = "parallel"))]
-    {
-        let mut touches = TouchList::default();
-        for item in &mut marbles {
-            each(&mut touches, item);
-        }
-    }
+    super::for_each_marble!(marbles, each);
 }

@@ -15,6 +15,27 @@
 //! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities |
 //! | `Finish` | `forces.rs` | on the last substep: clear forces, quarantine non-finite marbles |
 
+/// Runs `each(&mut touches, item)` for every item of the marble query `query`, with a
+/// scratch [`TouchList`](crate::narrow::TouchList): on bevy's compute task pool with the
+/// `parallel` feature (one scratch list per batch), in order otherwise. Each marble's work
+/// depends on that marble alone, so both give the same bits.
+macro_rules! for_each_marble {
+    ($query:expr, $each:expr) => {{
+        #[cfg(feature = "parallel")]
+        $query
+            .par_iter_mut()
+            .for_each_init(crate::narrow::TouchList::default, $each);
+        #[cfg(not(feature = "parallel"))]
+        {
+            let mut touches = crate::narrow::TouchList::default();
+            for item in &mut $query {
+                ($each)(&mut touches, item);
+            }
+        }
+    }};
+}
+pub(crate) use for_each_marble;
+
 pub mod boards;
 pub mod collide;
 pub mod detect;

@@ -67,17 +67,7 @@ pub fn respond(
             compensated_add(config.compensated, start.position, start.carry, out.d);
         velocity.0 = out.v;
     };
-    #[cfg(feature = "parallel")]
-    marbles
-        .par_iter_mut()
-        .for_each_init(TouchList::default, each);
-    #[cfg(not(feature = "parallel"))]
-    {
-        let mut touches = TouchList::default();
-        for item in &mut marbles {
-            each(&mut touches, item);
-        }
-    }
+    super::for_each_marble!(marbles, each);
 }
 
 /// [`respond`] for marbles that carry an [`AngularVelocity`]: with rolling on, they spin,
@@ -152,17 +142,7 @@ pub fn respond_spinning(
             spin.0 = out.w;
         }
     };
-    #[cfg(feature = "parallel")]
-    marbles
-        .par_iter_mut()
-        .for_each_init(TouchList::default, each);
-    #[cfg(not(feature = "parallel"))]
-    {
-        let mut touches = TouchList::default();
-        for item in &mut marbles {
-            each(&mut touches, item);
-        }
-    }
+    super::for_each_marble!(marbles, each);
 }
 
 /// One flagged marble: the touches detection recorded (gathered again only if it ran out
