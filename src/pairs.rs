@@ -246,6 +246,19 @@ struct Constraint {
     key: (u64, u64),
 }
 
+/// One projected Gauss–Seidel update of a contact row with closing speed `u` and effective
+/// mass `k`: the accumulated impulse `lambda` moves to stop the approach, never below
+/// zero; returns the change to apply, if any.
+#[inline]
+fn accumulate(lambda: &mut f32, u: f32, k: f32) -> Option<f32> {
+    let next = (*lambda - u * k).max(0.0);
+    let d = next - *lambda;
+    (d != 0.0).then(|| {
+        *lambda = next;
+        d
+    })
+}
+
 /// A pair row of the contact passes (compact copy of a [`Constraint`]).
 #[derive(Clone, Copy, Debug)]
 struct PairGs {
@@ -1159,20 +1172,14 @@ impl PairSolver {
             let mut largest = 0.0f32;
             for r in self.pair_gs.iter_mut() {
                 let u = (vel[r.j as usize] - vel[r.i as usize]).dot(r.n);
-                let lambda = (r.lambda - u * r.k).max(0.0);
-                let d = lambda - r.lambda;
-                if d != 0.0 {
-                    r.lambda = lambda;
+                if let Some(d) = accumulate(&mut r.lambda, u, r.k) {
                     r.apply(vel, inv, d);
                     largest = largest.max(d.abs() / r.k);
                 }
             }
             for r in self.board_gs.iter_mut() {
                 let u = (vel[r.i as usize] - r.vb).dot(r.n);
-                let lambda = (r.lambda - u * r.k).max(0.0);
-                let d = lambda - r.lambda;
-                if d != 0.0 {
-                    r.lambda = lambda;
+                if let Some(d) = accumulate(&mut r.lambda, u, r.k) {
                     r.apply(vel, inv, d);
                     largest = largest.max(d.abs() / r.k);
                 }
