@@ -2,9 +2,10 @@
 //! every half second, the fastest marble, how many move faster than 5 cm/s, the deepest
 //! marble–marble overlap and how many marbles touch each other; then the wall time.
 //!
-//! `cargo run --release --example marble_pile -- [MARBLES] [SUBSTEPS] [SOLVER_PASSES]`
-//! (defaults: 1000, the scene's 8 substeps and 30 passes). Try fewer substeps to see
-//! why the scene uses 8 (README, "Many marbles").
+//! `cargo run --release --example marble_pile -- [MARBLES] [SUBSTEPS] [SOLVER_PASSES]
+//! [SEED] [SECONDS]` (defaults: 1000, the scene's 8 substeps and 30 passes, the scene's
+//! own start, 6 s). A SEED nudges every marble by up to 5 µm: another start of the same
+//! pour. Try fewer substeps to see why the scene uses 8 (README, "Many marbles").
 
 use bevy_marble::prelude::*;
 use bevy_marble::scenes;
@@ -23,6 +24,16 @@ fn main() {
     if let Some(passes) = arg(3) {
         scene.solver_iterations = passes as u32;
     }
+    if let Some(seed) = arg(4) {
+        // Nudge every marble by up to 5 µm: another start of the same pour.
+        let mut state = seed as u32;
+        for m in &mut scene.marbles {
+            for c in &mut m.position {
+                state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                *c += 1e-5 * ((state >> 8) as f32 / (1u32 << 24) as f32 - 0.5);
+            }
+        }
+    }
     let mut sim = Simulation::from_scene(&scene).expect("the bench scene is valid");
     let r = scene.marbles[0].radius;
     println!(
@@ -30,7 +41,7 @@ fn main() {
         scene.dt, scene.substeps, scene.solver_iterations
     );
     println!("  time | fastest m/s | > 5 cm/s | deepest overlap / r | touching pairs");
-    let steps = (6.0 / scene.dt).round() as u64;
+    let steps = (arg(5).unwrap_or(6) as f32 / scene.dt).round() as u64;
     let every = (0.5 / scene.dt).round() as u64;
     let start = std::time::Instant::now();
     for step in 1..=steps {

@@ -11,6 +11,9 @@ fn main() {
     let mut scene = kind.build(n);
     if let Some(c) = args.get(4) {
         scene.marble_collisions = c == "collisions";
+        if c == "noboards" {
+            scene.boards.clear();
+        }
     }
     let mut sim = Simulation::from_scene(&scene).expect("valid scene");
     let start = std::time::Instant::now();

@@ -90,7 +90,8 @@ impl Default for Rotation {
     Friction,
     StepStart,
     Contacts,
-    PositionCarry
+    PositionCarry,
+    crate::narrow::NearPieces
 )]
 pub struct Marble;
 

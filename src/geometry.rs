@@ -301,6 +301,40 @@ impl BoardGeometry {
         Some(p.rotation * n)
     }
 
+    /// When piece `(part, sub)` is a half-space or a box and every centre within `spread` of
+    /// `centre` (board frame) that lies in front of one of its faces has its closest point
+    /// on that face, the face's outward normal (board frame): the distance from such a
+    /// centre is then affine, `n·(y − centre)` plus the distance from `centre`.
+    pub fn flat_face(&self, part: usize, sub: u32, centre: Vec3, spread: f32) -> Option<Vec3> {
+        let p = &self.parts[part];
+        let local = p.rotation.conjugate() * (centre - p.translation);
+        let n = match self.piece(part, sub) {
+            Piece::HalfSpace => Vec3::Y,
+            Piece::Cuboid(c) => {
+                let h = c.half_extents;
+                // The face the centre is farthest in front of; the centres within `spread`
+                // must stay inside that face's outline (those in front of the face then
+                // have their closest point on it).
+                let out = local.abs() - h;
+                let i = if out.x >= out.y && out.x >= out.z {
+                    0
+                } else if out.y >= out.z {
+                    1
+                } else {
+                    2
+                };
+                let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+                let inside = |a: usize| local[a].abs() + spread <= h[a];
+                if !(inside(j) && inside(k)) {
+                    return None;
+                }
+                Vec3::AXES[i] * local[i].signum()
+            }
+            Piece::Triangle(_) | Piece::Bowl(_) => return None,
+        };
+        Some(p.rotation * n)
+    }
+
     /// Whether every piece of part `part` is convex.
     #[inline]
     pub fn part_is_convex(&self, part: usize) -> bool {

@@ -30,6 +30,18 @@
 //! approach converges in one or two iterations; grazing approaches converge geometrically.
 //! Because each step is safe, a marble at any speed never passes through a board, however
 //! thin.
+//!
+//! # Near pieces
+//! Most marbles spend most substeps far from everything but the piece they roll on. Each
+//! marble keeps a [`NearPieces`] list (a Verlet list, or "skin", for board pieces): the
+//! pieces of one board within a few radii of where the list was built, in the board's
+//! frame. While the marble stays within the list's reach of that spot of the board, its
+//! touches and impacts need only the listed pieces — the same answers, bit for bit, as a
+//! search of the board (the pieces keep the search's order) — and detection rebuilds the
+//! list when the marble leaves it. When the list holds one flat face of a still board, it
+//! also gives the touch in closed form ([`NearPieces::lone_touch`]), and a marble resting
+//! or sliding there is resolved in closed form
+//! ([`crate::response::resolve_resting`]): no search at all in the commonest case.
 
 use std::sync::Arc;
 
@@ -37,7 +49,7 @@ use bevy_ecs::prelude::*;
 use glam::{Quat, Vec3};
 use parry3d::bounding_volume::Aabb;
 
-use crate::geometry::{BoardGeometry, PieceId, transform_aabb};
+use crate::geometry::{BoardGeometry, Piece, PieceId, transform_aabb};
 
 /// Conservative-advancement iterations per piece before giving up on convergence (the
 /// marble is then advanced to the last safe time and the search resumes from there).
@@ -70,6 +82,9 @@ pub struct BoardSnapshot {
     pub swept_aabb: Option<Aabb>,
     /// Farthest distance of the board's bounds from its origin (for rotation bounds).
     pub reach: f32,
+    /// Changes whenever the board's pose at a substep's start differs from the last
+    /// substep's (set by the prepare stage).
+    pub pose_version: u32,
 }
 
 impl BoardSnapshot {
@@ -121,6 +136,378 @@ pub struct BoardCache {
     pub boards: Vec<BoardSnapshot>,
     /// Substep duration these snapshots were prepared for, s.
     pub h: f32,
+    /// Changes whenever the board list changes other than by motion (a board added,
+    /// removed or given another shape): [`NearPieces`] lists of an older epoch are stale.
+    pub epoch: u32,
+    /// Each board's entity, shape, pose and pose version at the last substep.
+    pub(crate) layout: Vec<(Entity, usize, Vec3, Quat, u32)>,
+    /// The last pose version handed out.
+    pose_versions: u32,
+}
+
+impl BoardCache {
+    /// Moves to a new [`BoardCache::epoch`] if the boards' entities or shapes differ from
+    /// the last call's, and to a new [`BoardSnapshot::pose_version`] each board whose pose
+    /// changed (called by the prepare stage after filling `boards`).
+    pub(crate) fn update_epoch(&mut self) {
+        let same = self.layout.len() == self.boards.len()
+            && self
+                .layout
+                .iter()
+                .zip(&self.boards)
+                .all(|(l, b)| (l.0, l.1) == (b.entity, Arc::as_ptr(&b.geometry) as usize));
+        if !same {
+            self.epoch = self.epoch.wrapping_add(1);
+            self.layout.clear();
+            self.layout.extend(self.boards.iter().map(|b| {
+                (
+                    b.entity,
+                    Arc::as_ptr(&b.geometry) as usize,
+                    b.position,
+                    b.rotation,
+                    0,
+                )
+            }));
+        }
+        for (l, b) in self.layout.iter_mut().zip(self.boards.iter_mut()) {
+            if (l.2, l.3) != (b.position, b.rotation) {
+                self.pose_versions = self.pose_versions.wrapping_add(1);
+                (l.2, l.3, l.4) = (b.position, b.rotation, self.pose_versions);
+            }
+            b.pose_version = l.4;
+        }
+    }
+}
+
+/// Most pieces a [`NearPieces`] list holds.
+pub const NEAR_MAX: usize = 5;
+
+/// The pieces of one board near a marble, so that its queries visit those instead of
+/// searching the board: a Verlet list (a "skin") for board pieces.
+///
+/// Built around an *anchor*, the marble's centre in the board's frame, it holds every piece
+/// whose distance from the anchor, minus the radius, is below `reach`. Any piece within
+/// `g` of a centre `y` (board frame) is then within `g + |y − anchor|` of the anchor, so a
+/// query whose centres stay within `reach − g` of the anchor needs only the listed pieces
+/// ([`NearPieces::covers`]). The test is made in the board's frame at the query's time, so a
+/// marble riding a moving or turning board keeps its list as long as it stays near the
+/// same spot of the board. Queries the list does not cover search the board as before, and
+/// detection rebuilds a list that no longer covers the substep's start. The pieces are kept
+/// in the order a search visits them, so a query gives the same bits either way.
+#[derive(Component, Clone, Copy, Debug)]
+pub struct NearPieces {
+    pieces: [PieceId; NEAR_MAX],
+    len: u8,
+    /// Index of the board in [`BoardCache::boards`]; `u32::MAX`: no list.
+    board: u32,
+    /// The [`BoardCache::epoch`] it was built in.
+    epoch: u32,
+    /// The radius it was built for.
+    radius: f32,
+    /// Centre when built, board frame.
+    anchor: Vec3,
+    /// Every piece of the board closer than this to the anchor (distance minus radius) is
+    /// listed.
+    reach: f32,
+    /// Centre when built, world.
+    anchor_world: Vec3,
+    /// The board's [`BoardSnapshot::pose_version`] when built: while it is the same, the
+    /// board has not moved and the list can be tested in the world frame.
+    pose_version: u32,
+    /// For a lone piece of a still board, flat under every centre the list covers: its
+    /// normal (world; zero otherwise) and the anchor's gap to it.
+    face_normal: Vec3,
+    face_gap: f32,
+}
+
+impl Default for NearPieces {
+    fn default() -> Self {
+        NearPieces {
+            pieces: [PieceId::NONE; NEAR_MAX],
+            len: 0,
+            board: u32::MAX,
+            epoch: 0,
+            radius: 0.0,
+            anchor: Vec3::ZERO,
+            reach: 0.0,
+            anchor_world: Vec3::ZERO,
+            pose_version: 0,
+            face_normal: Vec3::ZERO,
+            face_gap: 0.0,
+        }
+    }
+}
+
+impl NearPieces {
+    /// The listed pieces.
+    #[inline]
+    pub fn pieces(&self) -> &[PieceId] {
+        &self.pieces[..self.len as usize]
+    }
+
+    /// Calls `f(part, sub, piece)` for every listed piece of `geometry` (the list's
+    /// board), in the order a search visits them.
+    #[inline]
+    fn visit(&self, geometry: &BoardGeometry, mut f: impl FnMut(usize, u32, &Piece)) {
+        for id in self.pieces() {
+            f(id.part(), id.sub(), &geometry.piece(id.part(), id.sub()));
+        }
+    }
+
+    /// The list for board `board`, if this is it.
+    #[inline]
+    fn of(near: Option<&NearPieces>, board: usize) -> Option<&NearPieces> {
+        near.filter(|l| l.board as usize == board)
+    }
+
+    /// True when every piece within `gap` of some centre within `spread` of `centre` (board
+    /// frame) is listed.
+    #[inline]
+    pub fn covers(&self, centre: Vec3, spread: f32, gap: f32) -> bool {
+        (centre - self.anchor).length() + spread + gap < self.reach
+    }
+
+    /// True when the list was built for these boards and this radius and covers the
+    /// centres within `spread` of `x` (world, at the substep's start) for touches within
+    /// `tol`.
+    pub fn is_fresh(&self, cache: &BoardCache, x: Vec3, r: f32, spread: f32, tol: f32) -> bool {
+        if self.board == u32::MAX || self.epoch != cache.epoch || self.radius != r {
+            return false;
+        }
+        let Some(b) = cache.boards.get(self.board as usize) else {
+            return false;
+        };
+        if b.pose_version == self.pose_version {
+            // The board is where it was: its frame moved with it.
+            return (x - self.anchor_world).length() + spread + tol < self.reach;
+        }
+        self.covers(b.rotation.conjugate() * (x - b.position), spread, tol)
+    }
+
+    /// The one touch [`gather`] would find at the substep's start for a marble of radius
+    /// `r` at `x` (world), when the list can vouch that it is the only piece within reach
+    /// of every centre within `spread` of `x`: the list holds one piece, of a board that
+    /// does not move, covers those centres, and no other board comes within reach. `None`
+    /// when the list cannot tell or the piece is farther than `tol`.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a hot kernel taking plain values"
+    )]
+    pub fn lone_touch(
+        &self,
+        boards: &[BoardSnapshot],
+        x: Vec3,
+        r: f32,
+        tol: f32,
+        spread: f32,
+        material: &Material,
+        hint: Vec3,
+    ) -> Option<Touch> {
+        let [id] = *self.pieces() else {
+            return None;
+        };
+        let bi = self.board as usize;
+        let b = boards.get(bi)?;
+        if b.is_moving() {
+            return None;
+        }
+        let reach = r + tol + spread;
+        let world = sphere_aabb(x, reach);
+        let others_clear = boards.iter().enumerate().all(|(i, o)| {
+            if i == bi {
+                return true;
+            }
+            match &o.swept_aabb {
+                Some(a) => !overlaps(a, &world),
+                // Unbounded (a plane): clear if still and no piece is near.
+                None if !o.is_moving() => {
+                    let local = o.rotation.conjugate() * (x - o.position);
+                    let mut near = false;
+                    o.geometry
+                        .for_each_piece(&sphere_aabb(local, reach), |_, _, _| near = true);
+                    !near
+                }
+                None => false,
+            }
+        });
+        if !others_clear {
+            return None;
+        }
+        if self.face_normal != Vec3::ZERO && b.pose_version == self.pose_version {
+            // A flat face where it was: the distance is affine in the centre.
+            let d = x - self.anchor_world;
+            if d.length() + spread + tol >= self.reach {
+                return None;
+            }
+            let n = self.face_normal;
+            let gap = self.face_gap + n.dot(d);
+            if gap.abs() > tol {
+                return None;
+            }
+            return Some(Touch {
+                piece: id,
+                point: x - (r + gap) * n,
+                normal: n,
+                gap,
+                board_velocity: Vec3::ZERO,
+                surface_accel: 0.0,
+                board_spin: Vec3::ZERO,
+                material: material.combine(b),
+                convex: true,
+            });
+        }
+        let inv = b.rotation.conjugate();
+        let local = inv * (x - b.position);
+        if !self.covers(local, spread, tol) {
+            return None;
+        }
+        // As `gather` computes it.
+        let piece = b.geometry.piece(id.part(), id.sub());
+        let p = b.geometry.proximity(id.part(), &piece, local, inv * hint);
+        let gap = p.distance - r;
+        if gap > tol {
+            return None;
+        }
+        let point = b.rotation * p.point + b.position;
+        let normal = b.rotation * p.normal;
+        Some(Touch {
+            piece: id,
+            point,
+            normal,
+            gap,
+            board_velocity: b.point_velocity(0.0, point),
+            surface_accel: b.surface_accel(0.0, point, normal),
+            board_spin: b.angular_velocity,
+            material: material.combine(b),
+            convex: piece.is_convex(),
+        })
+    }
+
+    /// Rebuilds the list around a marble of radius `r` at `x` (world, the substep's start):
+    /// the board with the nearest piece within `tol + skin`, and its pieces within that
+    /// reach (the nearest [`NEAR_MAX`] of them, the reach shrunk to exclude the rest).
+    /// Leaves no list when there is no board.
+    pub fn rebuild(&mut self, cache: &BoardCache, x: Vec3, r: f32, tol: f32, skin: f32) {
+        *self = NearPieces {
+            epoch: cache.epoch,
+            radius: r,
+            ..NearPieces::default()
+        };
+        let limit = tol + skin;
+        let world = sphere_aabb(x, r + limit);
+        // The best board so far: its nearest gap, its pieces (visit order, piece, gap)
+        // and the smallest gap left out.
+        let mut best: Option<(f32, Candidates)> = None;
+        for (bi, b) in cache.boards.iter().enumerate() {
+            if let Some(a) = &b.swept_aabb
+                && !overlaps(a, &world)
+            {
+                continue;
+            }
+            let inv = b.rotation.conjugate();
+            let local = inv * (x - b.position);
+            let mut found = Candidates::new(limit);
+            let mut order = 0u32;
+            b.geometry
+                .for_each_piece(&sphere_aabb(local, r + limit), |part, sub, piece| {
+                    let gap = b
+                        .geometry
+                        .proximity(part, piece, local, Vec3::ZERO)
+                        .distance
+                        - r;
+                    found.offer(order, PieceId::new(bi, part, sub), gap);
+                    order += 1;
+                });
+            let nearest = found.nearest();
+            if best.as_ref().is_none_or(|(g, _)| nearest < *g) {
+                self.board = bi as u32;
+                self.anchor = local;
+                self.pose_version = b.pose_version;
+                best = Some((nearest, found));
+            }
+        }
+        let Some((_, mut found)) = best else {
+            // Every board is out of reach: a list of none of the first board's pieces.
+            if let Some(b) = cache.boards.first() {
+                self.board = 0;
+                self.anchor = b.rotation.conjugate() * (x - b.position);
+                self.pose_version = b.pose_version;
+                self.anchor_world = x;
+                self.reach = limit;
+            }
+            return;
+        };
+        found.kept[..found.len].sort_unstable_by_key(|c| c.0);
+        for (slot, c) in self.pieces.iter_mut().zip(&found.kept[..found.len]) {
+            *slot = c.1;
+        }
+        self.len = found.len as u8;
+        self.anchor_world = x;
+        // A margin for the rounding of the distances the list was built from.
+        self.reach = found.excluded
+            - 8.0 * f32::EPSILON * (r + found.excluded + self.anchor.abs().max_element());
+        let b = &cache.boards[self.board as usize];
+        if let [id] = *self.pieces()
+            && !b.is_moving()
+            && let Some(n) = b
+                .geometry
+                .flat_face(id.part(), id.sub(), self.anchor, self.reach)
+        {
+            self.face_normal = b.rotation * n;
+            self.face_gap = found.kept[0].2;
+        }
+    }
+}
+
+/// The nearest pieces offered to a [`NearPieces`] build: up to [`NEAR_MAX`] with their
+/// gaps, and the smallest gap of those left out (the limit when none was).
+struct Candidates {
+    kept: [(u32, PieceId, f32); NEAR_MAX],
+    len: usize,
+    excluded: f32,
+}
+
+impl Candidates {
+    fn new(limit: f32) -> Self {
+        Candidates {
+            kept: [(0, PieceId::NONE, 0.0); NEAR_MAX],
+            len: 0,
+            excluded: limit,
+        }
+    }
+
+    /// Offers a piece at `gap`: kept if within the limit and among the nearest.
+    fn offer(&mut self, order: u32, piece: PieceId, gap: f32) {
+        if gap >= self.excluded {
+            return;
+        }
+        if self.len < NEAR_MAX {
+            self.kept[self.len] = (order, piece, gap);
+            self.len += 1;
+            return;
+        }
+        // Full: the farthest kept one makes way if it is farther.
+        let (far, _) = self
+            .kept
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.2.total_cmp(&b.1.2))
+            .expect("NEAR_MAX > 0");
+        if self.kept[far].2 > gap {
+            self.excluded = self.excluded.min(self.kept[far].2);
+            self.kept[far] = (order, piece, gap);
+        } else {
+            self.excluded = self.excluded.min(gap);
+        }
+    }
+
+    /// The smallest gap offered (infinite when none).
+    fn nearest(&self) -> f32 {
+        self.kept[..self.len]
+            .iter()
+            .map(|c| c.2)
+            .fold(f32::INFINITY, f32::min)
+    }
 }
 
 /// A marble touching a board piece at some time in the substep.
@@ -326,12 +713,15 @@ fn overlaps(a: &Aabb, b: &Aabb) -> bool {
 /// Collects into `out` the independent pieces within `tol` of a marble of radius `r`
 /// centred at `x`, at time `t` of the substep. The marble's `material` is combined with
 /// each board's; `hint` orients normals in degenerate cases (the marble's velocity reversed).
+/// `near`, the marble's [`NearPieces`], stands in for its board's search where it covers
+/// `x` (the same touches either way).
 #[expect(
     clippy::too_many_arguments,
     reason = "a hot kernel taking plain values"
 )]
 pub fn gather(
     boards: &[BoardSnapshot],
+    near: Option<&NearPieces>,
     t: f32,
     x: Vec3,
     r: f32,
@@ -353,9 +743,7 @@ pub fn gather(
         let inv = q.conjugate();
         let local = inv * (x - c);
         let local_hint = inv * hint;
-        // A sphere's bounds are the same in any frame.
-        let query = sphere_aabb(local, reach);
-        b.geometry.for_each_piece(&query, |part, sub, piece| {
+        let visit = |part: usize, sub: u32, piece: &Piece| {
             let p = b.geometry.proximity(part, piece, local, local_hint);
             let gap = p.distance - r;
             if gap <= tol {
@@ -375,7 +763,12 @@ pub fn gather(
                     tol,
                 );
             }
-        });
+        };
+        match NearPieces::of(near, bi) {
+            Some(list) if list.covers(local, 0.0, tol) => list.visit(&b.geometry, visit),
+            // A sphere's bounds are the same in any frame.
+            _ => b.geometry.for_each_piece(&sphere_aabb(local, reach), visit),
+        }
     }
 }
 
@@ -411,8 +804,11 @@ impl Path {
 /// touch at the path's start: `(tau, piece)`, `tau` measured from `path.t0`.
 ///
 /// Pieces in `touching` are skipped without a distance query (the marble touches them).
+/// `near`, the marble's [`NearPieces`], stands in for its board's search where it covers
+/// the path (the same answer either way).
 pub fn earliest_impact(
     boards: &[BoardSnapshot],
+    near: Option<&NearPieces>,
     path: &Path,
     span: f32,
     r: f32,
@@ -444,6 +840,20 @@ pub fn earliest_impact(
         }
         let (c0, q0) = b.pose_at(path.t0);
         let moving = b.is_moving();
+        let list = NearPieces::of(near, bi);
+        // On a still board, every centre of the path lies within `spread` of the chord's
+        // middle; a list that covers that ball and holds only touched pieces leaves
+        // nothing to search.
+        let covered = match list {
+            Some(l) if !moving => {
+                let spread = 0.5 * (end - path.x).length() + bulge;
+                l.covers(q0.conjugate() * (0.5 * (path.x + end) - c0), spread, tol)
+            }
+            _ => false,
+        };
+        if covered && list.is_some_and(|l| l.pieces().iter().all(|&p| touching.contains(p))) {
+            continue;
+        }
         // Everything the marble can reach this substep, in the board's frame; a moving
         // board sees it through both end poses and, if it turns, a margin for the turn.
         let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());
@@ -498,7 +908,7 @@ pub fn earliest_impact(
             continue;
         }
         let limit = best.map_or(span, |(t, _)| t);
-        b.geometry.for_each_piece(&query, |part, sub, piece| {
+        let each = |part: usize, sub: u32, piece: &Piece| {
             if touching.contains(PieceId::new(bi, part, sub)) {
                 return;
             }
@@ -557,7 +967,320 @@ pub fn earliest_impact(
             // Converged, or out of iterations at a safe time: either way report it, the
             // caller advances there and searches again.
             best = Some((tau, PieceId::new(bi, part, sub)));
-        });
+        };
+        // A moving board: the list must cover the centres' bounds in its frame.
+        let covered = covered
+            || (moving
+                && list.is_some_and(|l| {
+                    let far = (centre_query.mins - l.anchor)
+                        .abs()
+                        .max((centre_query.maxs - l.anchor).abs());
+                    l.covers(l.anchor + far, 0.0, tol)
+                }));
+        match list {
+            Some(l) if covered => l.visit(&b.geometry, each),
+            _ => b.geometry.for_each_piece(&query, each),
+        }
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::PartShape;
+    use parry3d::shape::{Cuboid, HalfSpace};
+
+    /// A tilted walled box (floor and four walls, turning when `spin` is not zero) and a
+    /// plane below it, as the prepare stage would snapshot them.
+    fn boards(spin: Vec3) -> BoardCache {
+        let wall =
+            |half: Vec3, at: Vec3| (at, Quat::IDENTITY, PartShape::Cuboid(Cuboid::new(half)));
+        let walled = BoardGeometry::compound(vec![
+            wall(Vec3::new(0.3, 0.01, 0.3), Vec3::new(0.0, -0.01, 0.0)),
+            wall(Vec3::new(0.01, 0.03, 0.3), Vec3::new(0.29, 0.03, 0.0)),
+            wall(Vec3::new(0.01, 0.03, 0.3), Vec3::new(-0.29, 0.03, 0.0)),
+            wall(Vec3::new(0.3, 0.03, 0.01), Vec3::new(0.0, 0.03, 0.29)),
+            wall(Vec3::new(0.3, 0.03, 0.01), Vec3::new(0.0, 0.03, -0.29)),
+        ]);
+        let plane = BoardGeometry::single(PartShape::HalfSpace(HalfSpace::new(Vec3::Y)));
+        let snapshot =
+            |entity: u32, geometry: BoardGeometry, position: Vec3, rotation: Quat| BoardSnapshot {
+                entity: Entity::from_raw_u32(entity).unwrap(),
+                geometry: Arc::new(geometry),
+                position,
+                rotation,
+                velocity: Vec3::ZERO,
+                angular_velocity: Vec3::ZERO,
+                restitution: 0.5,
+                friction: 0.5,
+                rolling_resistance: 0.0,
+                spin_damping: 0.0,
+                swept_aabb: None,
+                reach: f32::INFINITY,
+                pose_version: 0,
+            };
+        let mut cache = BoardCache {
+            h: 1.0 / 60.0,
+            ..BoardCache::default()
+        };
+        let mut tilted = snapshot(
+            1,
+            walled,
+            Vec3::new(0.1, 0.5, -0.2),
+            Quat::from_rotation_z(0.02),
+        );
+        tilted.angular_velocity = spin;
+        let local = tilted.geometry.local_aabb().unwrap();
+        let world = crate::geometry::transform_aabb(&local, tilted.position, tilted.rotation);
+        tilted.swept_aabb = Some(Aabb::new(
+            world.mins - Vec3::splat(0.05),
+            world.maxs + Vec3::splat(0.05),
+        ));
+        cache.boards.push(snapshot(
+            2,
+            plane,
+            Vec3::new(0.0, -1.0, 0.0),
+            Quat::IDENTITY,
+        ));
+        cache.boards.push(tilted);
+        cache.update_epoch();
+        cache
+    }
+
+    struct Lcg(u32);
+    impl Lcg {
+        fn next(&mut self) -> f32 {
+            self.0 = self.0.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (self.0 >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        }
+        fn vec(&mut self, scale: Vec3) -> Vec3 {
+            Vec3::new(self.next(), self.next(), self.next()) * scale
+        }
+    }
+
+    const R: f32 = 0.008;
+
+    /// A marble centre on the box's floor or against a wall or in a corner, world frame.
+    fn near_the_box(cache: &BoardCache, rng: &mut Lcg) -> Vec3 {
+        let b = &cache.boards[1];
+        let mut y = rng.vec(Vec3::new(0.62, 0.0, 0.62));
+        y.y = R + 1e-6 * rng.next();
+        y.x = y.x.clamp(-0.28 + R, 0.28 - R);
+        y.z = y.z.clamp(-0.28 + R, 0.28 - R);
+        b.rotation * y + b.position
+    }
+
+    /// Gathering through a marble's list gives the same touches, bit for bit, as searching
+    /// the boards, for centres anywhere the list covers (on the floor, against walls, in
+    /// corners); the lone touch of a list, where it vouches for one, is the search's touch.
+    #[test]
+    fn near_lists_gather_what_a_search_finds() {
+        let cache = boards(Vec3::ZERO);
+        let mut rng = Lcg(7);
+        let material = Material {
+            restitution: 0.5,
+            ..Material::default()
+        };
+        let (mut lone, mut compared) = (0, 0);
+        for _ in 0..400 {
+            let anchor = near_the_box(&cache, &mut rng);
+            let tol = touch_tolerance(1e-4, R, anchor);
+            let mut list = NearPieces::default();
+            list.rebuild(&cache, anchor, R, tol, 2.0 * R);
+            assert!(list.is_fresh(&cache, anchor, R, 0.0, tol));
+            for _ in 0..10 {
+                // Within the list's reach and beyond it.
+                let mut x = anchor + rng.vec(Vec3::splat(8.0 * R));
+                if rng.next() > 0.0 {
+                    // Onto the floor, where the lone touch applies.
+                    let b = &cache.boards[1];
+                    let mut y = b.rotation.conjugate() * (x - b.position);
+                    y.y = R + 0.5 * tol * rng.next();
+                    x = b.rotation * y + b.position;
+                }
+                let (mut searched, mut listed) = (TouchList::default(), TouchList::default());
+                gather(
+                    &cache.boards,
+                    None,
+                    0.0,
+                    x,
+                    R,
+                    tol,
+                    &material,
+                    Vec3::Y,
+                    &mut searched,
+                );
+                gather(
+                    &cache.boards,
+                    Some(&list),
+                    0.0,
+                    x,
+                    R,
+                    tol,
+                    &material,
+                    Vec3::Y,
+                    &mut listed,
+                );
+                let key = |t: &Touch| {
+                    (
+                        t.piece,
+                        t.gap.to_bits(),
+                        t.normal.to_array().map(f32::to_bits),
+                    )
+                };
+                assert_eq!(
+                    searched.as_slice().iter().map(key).collect::<Vec<_>>(),
+                    listed.as_slice().iter().map(key).collect::<Vec<_>>(),
+                );
+                assert_eq!(searched.is_complete(), listed.is_complete());
+                compared += 1;
+                if let Some(t) = list.lone_touch(&cache.boards, x, R, tol, 0.0, &material, Vec3::Y)
+                {
+                    let [s] = searched.as_slice() else {
+                        panic!("lone touch {t:?} where the search found {searched:?}");
+                    };
+                    assert_eq!(s.piece, t.piece);
+                    assert!((s.gap - t.gap).abs() < 1e-7, "{} vs {}", s.gap, t.gap);
+                    assert!((s.normal - t.normal).length() < 1e-6);
+                    assert!((s.point - t.point).length() < 1e-6);
+                    lone += 1;
+                }
+            }
+        }
+        assert!(compared == 4000 && lone > 150, "{lone} lone touches");
+    }
+
+    /// The closed form for a marble resting or sliding on one piece
+    /// ([`crate::response::resolve_resting`]) gives the event loop's result, bit for bit,
+    /// whenever it applies: on the floor, slow or fast, approaching (a collision) or not,
+    /// for every integrator.
+    #[test]
+    fn resting_closed_form_is_the_event_loop() {
+        use crate::components::Contacts;
+        use crate::config::Integrator;
+        use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting};
+        let cache = boards(Vec3::ZERO);
+        let b = &cache.boards[1];
+        let mut rng = Lcg(5);
+        let mut applied = 0;
+        for k in 0..4000 {
+            let integrator = [
+                Integrator::SemiImplicitEuler,
+                Integrator::VelocityVerlet,
+                Integrator::Rk4,
+                Integrator::ExplicitEuler,
+            ][k % 4];
+            let p = SubstepParams {
+                h: cache.h,
+                integrator,
+                ccd: true,
+                threshold: 0.05,
+                tolerance: 1e-4,
+                max_impacts: 8,
+            };
+            let x0 = near_the_box(&cache, &mut rng);
+            let tol = touch_tolerance(p.tolerance, R, x0);
+            let speed = if k % 3 == 0 { 0.02 } else { 0.5 };
+            let m = MarbleIn {
+                x0,
+                v0: rng.vec(Vec3::splat(speed)),
+                w0: None,
+                a: b.rotation * Vec3::new(0.0, -9.81, 0.0) + rng.vec(Vec3::splat(2.0)),
+                r: R,
+                material: Material {
+                    restitution: 0.7,
+                    ..Material::default()
+                },
+            };
+            let mut list = NearPieces::default();
+            list.rebuild(&cache, x0, R, tol, 4.0 * R);
+            let spread = (m.v0.length() + 2.0 * m.a.length() * p.h) * p.h;
+            let Some(tc) = list.lone_touch(&cache.boards, x0, R, tol, spread, &m.material, -m.v0)
+            else {
+                continue;
+            };
+            let mut fast = Contacts::default();
+            let Some(closed) = resolve_resting(&cache.boards, &p, &m, &tc, &mut fast) else {
+                continue;
+            };
+            let mut touches = TouchList::default();
+            gather(
+                &cache.boards,
+                None,
+                0.0,
+                x0,
+                R,
+                tol,
+                &m.material,
+                -m.v0,
+                &mut touches,
+            );
+            let mut full = Contacts::default();
+            let looped = resolve(
+                &cache.boards,
+                None,
+                &p,
+                &m,
+                Found::Touching,
+                &mut touches,
+                &mut full,
+            );
+            let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+            assert_eq!(
+                (bits(closed.d), bits(closed.v)),
+                (bits(looped.d), bits(looped.v)),
+                "case {k}"
+            );
+            let record = |c: &Contacts| {
+                c.iter()
+                    .map(|c| (c.piece, c.kind, c.closing_speed.to_bits(), bits(c.normal)))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(record(&fast), record(&full), "case {k}");
+            applied += 1;
+        }
+        assert!(applied > 400, "applied {applied} times");
+    }
+
+    /// The earliest impact along a path the list covers is the search's, on a still and on
+    /// a turning board.
+    #[test]
+    fn near_lists_find_the_searched_impacts() {
+        for spin in [Vec3::ZERO, Vec3::new(0.0, 0.0, 0.4)] {
+            let cache = boards(spin);
+            let mut rng = Lcg(11);
+            let mut impacts = 0;
+            for _ in 0..2000 {
+                let anchor = near_the_box(&cache, &mut rng);
+                let tol = touch_tolerance(1e-4, R, anchor);
+                let mut list = NearPieces::default();
+                list.rebuild(&cache, anchor, R, tol, 4.0 * R);
+                let path = Path {
+                    t0: 0.0,
+                    x: anchor + rng.vec(Vec3::splat(R)) + Vec3::new(0.0, 0.5 * R, 0.0),
+                    v: rng.vec(Vec3::splat(6.0)),
+                    a: Vec3::new(0.0, -9.81, 0.0),
+                };
+                let touching = TouchList::default();
+                let searched =
+                    earliest_impact(&cache.boards, None, &path, cache.h, R, tol, &touching);
+                let listed = earliest_impact(
+                    &cache.boards,
+                    Some(&list),
+                    &path,
+                    cache.h,
+                    R,
+                    tol,
+                    &touching,
+                );
+                assert_eq!(
+                    searched.map(|(t, p)| (t.to_bits(), p)),
+                    listed.map(|(t, p)| (t.to_bits(), p))
+                );
+                impacts += usize::from(searched.is_some());
+            }
+            assert!(impacts > 300, "{impacts} impacts");
+        }
+    }
 }

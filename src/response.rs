@@ -21,7 +21,9 @@
 //!    never mistaken for an impact. Several touches are solved together by a few
 //!    Gauss–Seidel passes that enforce every `u_n ≥ target`.
 //! 3. **Constrained acceleration.** For every touch the marble is not leaving, the marble
-//!    is put on the surface (it is within the touching tolerance of it), its residual normal
+//!    is put on the surface (it is within the touching tolerance of it, or, at the
+//!    substep's start, overlapping it: the end-of-substep check would put it there), its
+//!    residual normal
 //!    speed relative to the board is removed, and so is the part of the acceleration that
 //!    pushes into the board. A resting marble therefore stays exactly where it is (no
 //!    sinking, no correction, no jitter), and a marble on a smooth incline follows its
@@ -60,6 +62,12 @@
 //! The forces are constant over each stretch between events, so the exact-parabola path
 //! and the spin `ω + α τ` stay exact there.
 //!
+//! The commonest case — a marble that does not spin, on one convex piece of a still board,
+//! not leaving it, with nothing else within reach of its substep — has this loop's result
+//! in closed form ([`resolve_resting`]): the response, the constrained acceleration and
+//! the exact path to the substep's end, with no search (see [`crate::narrow`], "Near
+//! pieces"). A unit test checks it gives the loop's bits.
+//!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever finishes the substep as without continuous collision: its
 //! free path, then the end-of-substep check.
@@ -71,7 +79,8 @@ use glam::Vec3;
 use crate::components::{Contact, ContactKind, Contacts};
 use crate::config::Integrator;
 use crate::narrow::{
-    BoardSnapshot, MAX_TOUCHES, Material, Path, Touch, TouchList, earliest_impact, gather,
+    BoardSnapshot, MAX_TOUCHES, Material, NearPieces, Path, Touch, TouchList, earliest_impact,
+    gather,
 };
 
 /// The settings of one substep, copied out of [`crate::config::StepConfig`].
@@ -177,6 +186,7 @@ pub struct MarbleOut {
 /// [`Found::Touching`].
 pub fn resolve(
     boards: &[BoardSnapshot],
+    near: Option<&NearPieces>,
     p: &SubstepParams,
     m: &MarbleIn,
     found: Found,
@@ -185,15 +195,16 @@ pub fn resolve(
 ) -> MarbleOut {
     // Two instances of one loop: a marble that does not spin pays nothing for rolling.
     if m.w0.is_some() {
-        resolve_with::<true>(boards, p, m, found, touches, contacts)
+        resolve_with::<true>(boards, near, p, m, found, touches, contacts)
     } else {
-        resolve_with::<false>(boards, p, m, found, touches, contacts)
+        resolve_with::<false>(boards, near, p, m, found, touches, contacts)
     }
 }
 
 /// [`resolve`] for a marble that spins (`SPINS`) or not.
 fn resolve_with<const SPINS: bool>(
     boards: &[BoardSnapshot],
+    near: Option<&NearPieces>,
     p: &SubstepParams,
     m: &MarbleIn,
     found: Found,
@@ -217,15 +228,32 @@ fn resolve_with<const SPINS: bool>(
     // Whether the end-of-substep check can be skipped: see below.
     let mut settled_start = matches!(found, Found::Touching);
     let regather = |t: f32, s: &State, touches: &mut TouchList| {
-        gather(boards, t, m.x0 + s.d, m.r, tol, &m.material, -s.v, touches);
+        gather(
+            boards,
+            near,
+            t,
+            m.x0 + s.d,
+            m.r,
+            tol,
+            &m.material,
+            -s.v,
+            touches,
+        );
     };
 
     // From here on `s.v` is the path velocity (see `Integrator`), and `motion` the
     // accelerations left after the constraints and friction of the touches.
     let mut motion = match found {
         Found::Touching => {
-            respond::<SPINS>(touches, &mut s, p.threshold, boards, 0.0, contacts);
-            let motion = settle::<SPINS>(touches, &mut s, m.a, sep);
+            respond::<SPINS>(
+                touches.as_slice(),
+                &mut s,
+                p.threshold,
+                boards,
+                0.0,
+                contacts,
+            );
+            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, true);
             s.v += offset(motion.a);
             if SPINS {
                 // The spin gets the same offset, so that a marble rolling in the
@@ -240,8 +268,8 @@ fn resolve_with<const SPINS: bool>(
             t = tau;
             impacts = 1;
             regather(t, &s, touches);
-            respond::<SPINS>(touches, &mut s, p.threshold, boards, t, contacts);
-            settle::<SPINS>(touches, &mut s, m.a, sep)
+            respond::<SPINS>(touches.as_slice(), &mut s, p.threshold, boards, t, contacts);
+            settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false)
         }
         Found::Overlap => {
             s.v += offset(m.a);
@@ -266,14 +294,14 @@ fn resolve_with<const SPINS: bool>(
                 v: s.v,
                 a: motion.a,
             };
-            if let Some((tau, _)) = earliest_impact(boards, &path, reach, m.r, tol, touches) {
+            if let Some((tau, _)) = earliest_impact(boards, near, &path, reach, m.r, tol, touches) {
                 advance::<SPINS>(&mut s, &motion, tau);
                 t += tau;
                 settled_start = false;
                 impacts += 1;
                 regather(t, &s, touches);
-                respond::<SPINS>(touches, &mut s, p.threshold, boards, t, contacts);
-                motion = settle::<SPINS>(touches, &mut s, m.a, sep);
+                respond::<SPINS>(touches.as_slice(), &mut s, p.threshold, boards, t, contacts);
+                motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false);
                 continue;
             }
         }
@@ -282,7 +310,7 @@ fn resolve_with<const SPINS: bool>(
             t += reach;
             settled_start = false;
             regather(t, &s, touches);
-            motion = settle::<SPINS>(touches, &mut s, m.a, sep);
+            motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false);
             continue;
         }
         t = p.h;
@@ -291,7 +319,7 @@ fn resolve_with<const SPINS: bool>(
 
     // The end-of-substep check finds nothing when the marble spent the whole substep on
     // the touches it started with, all of them complete (no other piece within reach),
-    // not overlapping, sustained (not leaving: normal speed and acceleration into them
+    // put onto their surfaces at the start, sustained (not leaving: normal speed and acceleration into them
     // removed), convex and on static boards: a convex piece lies behind its tangent plane,
     // and a path that never approaches that plane never enters it; every other piece was
     // watched by continuous collision. That is the common case of a marble resting,
@@ -303,7 +331,6 @@ fn resolve_with<const SPINS: bool>(
         && touches.as_slice().iter().all(|tc| {
             tc.convex
                 && !boards[tc.piece.board()].is_moving()
-                && tc.gap >= 0.0
                 && (s.v - tc.board_velocity).dot(tc.normal) <= sep
                 && motion.a.dot(tc.normal) >= 0.0
         })
@@ -346,7 +373,7 @@ fn resolve_with<const SPINS: bool>(
     }
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
-    let end = settle::<SPINS>(touches, &mut s, m.a, sep);
+    let end = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false);
     if settled_start
         && t >= p.h
         && matches!(p.integrator, Integrator::VelocityVerlet | Integrator::Rk4)
@@ -370,6 +397,45 @@ fn resolve_with<const SPINS: bool>(
         v: s.v - offset(end.a),
         w: s.w - offset(end.alpha),
     }
+}
+
+/// [`resolve`] in closed form for its commonest case, a marble resting, sliding or
+/// rolling on one piece: a marble that does not spin, whose only touch at the substep's
+/// start is `tc` (on a convex piece of a still board, not overlapping it), that does not
+/// leave it, and for which nothing else is within reach of its substep (its
+/// [`NearPieces`] list says so: continuous collision has nothing to search). The same
+/// operations as the event loop in that case, without its searches: the response, the
+/// constrained acceleration, the exact path to the substep's end. `None` (and `contacts`
+/// to be rewritten) when the marble leaves the piece: the event loop handles that.
+pub fn resolve_resting(
+    boards: &[BoardSnapshot],
+    p: &SubstepParams,
+    m: &MarbleIn,
+    tc: &Touch,
+    contacts: &mut Contacts,
+) -> Option<MarbleOut> {
+    debug_assert!(m.w0.is_none() && tc.convex && p.ccd);
+    let sep = separation_speed(p.threshold);
+    let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
+    let mut s = State {
+        d: Vec3::ZERO,
+        v: m.v0,
+        w: Vec3::ZERO,
+        r: m.r,
+    };
+    let touch = std::slice::from_ref(tc);
+    contacts.clear();
+    respond::<false>(touch, &mut s, p.threshold, boards, 0.0, contacts);
+    let motion = settle::<false>(touch, &mut s, m.a, sep, true);
+    s.v += offset(motion.a);
+    advance::<false>(&mut s, &motion, p.h);
+    // The event loop's test for skipping its end-of-substep check.
+    let stays = (s.v - tc.board_velocity).dot(tc.normal) <= sep && motion.a.dot(tc.normal) >= 0.0;
+    stays.then(|| MarbleOut {
+        d: s.d,
+        v: s.v - offset(motion.a),
+        w: Vec3::ZERO,
+    })
 }
 
 /// Free motion under `a`: no constraint, no friction.
@@ -418,14 +484,13 @@ fn push_tangential(s: &mut State, n: Vec3, j: Vec3) {
 /// normal velocity, and (for spinning marbles) friction impulses at most `μ` × each normal
 /// impulse act against the slip; every touch is recorded.
 fn respond<const SPINS: bool>(
-    touches: &TouchList,
+    list: &[Touch],
     s: &mut State,
     threshold: f32,
     boards: &[BoardSnapshot],
     t: f32,
     contacts: &mut Contacts,
 ) {
-    let list = touches.as_slice();
     let mut target = [f32::NEG_INFINITY; MAX_TOUCHES];
     let mut normal_impulse = [0.0f32; MAX_TOUCHES];
     let mut any = false;
@@ -486,19 +551,25 @@ fn respond<const SPINS: bool>(
 
 /// Step 3 of the module docs: for every touch the marble is not leaving (normal speed
 /// relative to the board within `sep`), the marble is put on the surface (it is within the
-/// touching tolerance, so this moves it by less than that), its residual normal speed
+/// touching tolerance, so this moves it by less than that; with `overlap`, at the
+/// substep's start, also out of an overlap), its residual normal speed
 /// relative to the board is removed, and so is the part of the acceleration that pushes
 /// into the board. Without the first two, rounding would let a resting or sliding marble
 /// drift off its surface by ulps per step. For spinning marbles, friction, rolling
 /// resistance and spin damping then act on those touches (module docs, "Rolling").
 #[inline]
-fn settle<const SPINS: bool>(touches: &TouchList, s: &mut State, a: Vec3, sep: f32) -> Motion {
+fn settle<const SPINS: bool>(
+    list: &[Touch],
+    s: &mut State,
+    a: Vec3,
+    sep: f32,
+    overlap: bool,
+) -> Motion {
     let mut a = a;
-    let list = touches.as_slice();
     for tc in list {
         let u = (s.v - tc.board_velocity).dot(tc.normal);
         if u <= sep {
-            if tc.gap > 0.0 {
+            if tc.gap > 0.0 || (overlap && tc.gap < 0.0) {
                 s.d -= tc.gap * tc.normal;
             }
             s.v -= u * tc.normal;

@@ -77,8 +77,10 @@ pub fn prepare_boards(
             spin_damping: spin_damping.map_or(0.0, |c| c.0),
             swept_aabb,
             reach,
+            pose_version: 0,
         });
     }
+    cache.update_epoch();
 }
 
 /// Advances every board by its linear and angular velocity over the substep.

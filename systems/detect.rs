@@ -3,44 +3,65 @@
 use bevy_ecs::prelude::*;
 
 use crate::components::{
-    Acceleration, Contact, ContactKind, Contacts, Marble, Pending, Position, Quarantined, Radius,
-    Restitution, StepStart,
+    Acceleration, AngularVelocity, Contact, ContactKind, Contacts, Marble, Pending, Position,
+    PositionCarry, Quarantined, Radius, Restitution, StepStart, Velocity, compensated_add,
 };
 use crate::config::StepConfig;
 use crate::narrow::{
-    BoardCache, Material, Path, TouchList, earliest_impact, gather, touch_tolerance,
+    BoardCache, Material, NearPieces, Path, TouchList, earliest_impact, gather, touch_tolerance,
 };
+use crate::response::{MarbleIn, SubstepParams, resolve_resting};
+
+/// A rebuilt [`NearPieces`] list reaches this many substeps of the marble's motion beyond
+/// it (within half a radius and four radii): rebuilt every few substeps at most, short
+/// enough to hold only the pieces around the marble.
+const NEAR_SKIN: f32 = 4.0;
 
 /// For every marble: the board pieces it touches at the substep's start, each classified
 /// by its normal closing speed *before this step's forces* (a collision above
 /// `restitution_threshold`, else a contact); if it touches nothing, the first impact along
 /// its free path (`ccd`) or its overlap at the end of the path (no `ccd`). Marbles with
-/// anything to resolve are flagged for the response stage.
+/// anything to resolve are flagged for the response stage, except those resting or
+/// sliding on one piece with nothing else near ([`resolve_resting`]), resolved here. The
+/// marble's [`NearPieces`] list is rebuilt when it no longer covers the substep.
 pub fn detect_contacts(
     config: Res<StepConfig>,
     cache: Res<BoardCache>,
     mut marbles: Query<
         (
-            &Position,
+            (
+                &mut Position,
+                &mut PositionCarry,
+                &mut Velocity,
+                Has<AngularVelocity>,
+            ),
             &StepStart,
             &Acceleration,
             &Radius,
             &Restitution,
-            &mut Contacts,
+            (&mut Contacts, &mut NearPieces),
         ),
         (With<Marble>, Without<Quarantined>),
     >,
 ) {
     let boards = cache.boards.as_slice();
     let h = cache.h;
+    let params = SubstepParams::from_config(&config, h);
     let each = |touches: &mut TouchList,
-                (position, start, acceleration, radius, restitution, mut contacts): (
-        &Position,
+                (
+        (mut position, mut carry, mut velocity, spins),
+        start,
+        acceleration,
+        radius,
+        restitution,
+        (mut contacts, mut near),
+    ): (
+        (Mut<Position>, Mut<PositionCarry>, Mut<Velocity>, bool),
         &StepStart,
         &Acceleration,
         &Radius,
         &Restitution,
-        Mut<Contacts>,
+        (Mut<Contacts>, Mut<NearPieces>),
     )| {
         let contacts = contacts.bypass_change_detection();
         contacts.clear();
@@ -49,8 +70,58 @@ pub fn detect_contacts(
         }
         let r = radius.0;
         let tol = touch_tolerance(config.contact_tolerance, r, start.position);
+        let material = Material {
+            restitution: restitution.0,
+            ..Material::default()
+        };
+        // The board pieces near the marble should cover where it can go this substep
+        // (each query checks that they do, and searches the boards where not).
+        let spread = (start.velocity.length() + 2.0 * acceleration.0.length() * h) * h;
+        let near = near.bypass_change_detection();
+        if !near.is_fresh(&cache, start.position, r, spread, tol) {
+            if spread < 2.0 * r {
+                let skin = (NEAR_SKIN * spread).clamp(2.0 * r, 8.0 * r);
+                near.rebuild(&cache, start.position, r, tol, skin);
+            } else {
+                // Too fast for a list to last: search the boards.
+                *near = NearPieces::default();
+            }
+        }
+        // The commonest case, a marble resting or sliding on one piece with nothing else
+        // near, is resolved here in closed form (the response stage skips it).
+        if config.ccd
+            && !(spins && config.rolling)
+            && let Some(tc) = near.lone_touch(
+                boards,
+                start.position,
+                r,
+                tol,
+                spread,
+                &material,
+                -start.velocity,
+            )
+            && tc.convex
+        {
+            let marble = MarbleIn {
+                x0: start.position,
+                v0: start.velocity,
+                w0: None,
+                a: acceleration.0,
+                r,
+                material,
+            };
+            if let Some(out) = resolve_resting(boards, &params, &marble, &tc, contacts) {
+                (position.0, carry.0) =
+                    compensated_add(config.compensated, start.position, start.carry, out.d);
+                velocity.0 = out.v;
+                return;
+            }
+            contacts.clear();
+        }
+        let near = Some(&*near);
         gather(
             boards,
+            near,
             0.0,
             start.position,
             r,
@@ -90,13 +161,14 @@ pub fn detect_contacts(
                 v: start.velocity + config.integrator.velocity_offset(acceleration.0, h),
                 a: acceleration.0,
             };
-            if let Some((tau, _)) = earliest_impact(boards, &path, h, r, tol, touches) {
+            if let Some((tau, _)) = earliest_impact(boards, near, &path, h, r, tol, touches) {
                 contacts.pending = Pending::Impact(tau);
             }
         } else {
             let tol_end = touch_tolerance(config.contact_tolerance, r, position.0);
             gather(
                 boards,
+                near,
                 h,
                 position.0,
                 r,

@@ -8,7 +8,9 @@ use crate::components::{
     compensated_add,
 };
 use crate::config::StepConfig;
-use crate::narrow::{BoardCache, BoardSnapshot, Material, TouchList, gather, touch_tolerance};
+use crate::narrow::{
+    BoardCache, BoardSnapshot, Material, NearPieces, TouchList, gather, touch_tolerance,
+};
 use crate::response::{Found, MarbleIn, MarbleOut, SubstepParams, resolve};
 
 /// Resolves every flagged marble that does not spin through the substep's event loop
@@ -26,7 +28,7 @@ pub fn respond(
                 &Acceleration,
                 &Radius,
                 &Restitution,
-                &mut Contacts,
+                (&mut Contacts, &NearPieces),
             ),
         ),
         (With<Marble>, Without<Quarantined>, Without<AngularVelocity>),
@@ -37,7 +39,7 @@ pub fn respond(
     let each = |touches: &mut TouchList,
                 (
         (mut position, mut carry, mut velocity),
-        (start, acceleration, radius, e, mut contacts),
+        (start, acceleration, radius, e, (mut contacts, near)),
     ): (
         (Mut<Position>, Mut<PositionCarry>, Mut<Velocity>),
         (
@@ -45,7 +47,7 @@ pub fn respond(
             &Acceleration,
             &Radius,
             &Restitution,
-            Mut<Contacts>,
+            (Mut<Contacts>, &NearPieces),
         ),
     )| {
         if contacts.pending == Pending::None {
@@ -62,7 +64,7 @@ pub fn respond(
                 ..Material::default()
             },
         };
-        let out = respond_one(boards, &params, &marble, &mut contacts, touches);
+        let out = respond_one(boards, near, &params, &marble, &mut contacts, touches);
         (position.0, carry.0) =
             compensated_add(config.compensated, start.position, start.carry, out.d);
         velocity.0 = out.v;
@@ -87,6 +89,7 @@ pub fn respond_spinning(
             ),
             (&StepStart, &Acceleration, &Radius, &mut Contacts),
             (
+                &NearPieces,
                 &Restitution,
                 &Friction,
                 Option<&RollingResistance>,
@@ -102,7 +105,7 @@ pub fn respond_spinning(
                 (
         (mut position, mut carry, mut velocity, mut spin),
         (start, acceleration, radius, mut contacts),
-        (restitution, friction, rolling_resistance, spin_damping),
+        (near, restitution, friction, rolling_resistance, spin_damping),
     ): (
         (
             Mut<Position>,
@@ -112,6 +115,7 @@ pub fn respond_spinning(
         ),
         (&StepStart, &Acceleration, &Radius, Mut<Contacts>),
         (
+            &NearPieces,
             &Restitution,
             &Friction,
             Option<&RollingResistance>,
@@ -134,7 +138,7 @@ pub fn respond_spinning(
                 spin_damping: spin_damping.map_or(0.0, |c| c.0),
             },
         };
-        let out = respond_one(boards, &params, &marble, &mut contacts, touches);
+        let out = respond_one(boards, near, &params, &marble, &mut contacts, touches);
         (position.0, carry.0) =
             compensated_add(config.compensated, start.position, start.carry, out.d);
         velocity.0 = out.v;
@@ -149,6 +153,7 @@ pub fn respond_spinning(
 /// of room), then the event loop.
 fn respond_one(
     boards: &[BoardSnapshot],
+    near: &NearPieces,
     params: &SubstepParams,
     marble: &MarbleIn,
     contacts: &mut Contacts,
@@ -166,6 +171,7 @@ fn respond_one(
                 let tol = touch_tolerance(params.tolerance, marble.r, marble.x0);
                 gather(
                     boards,
+                    Some(near),
                     0.0,
                     marble.x0,
                     marble.r,
@@ -180,5 +186,5 @@ fn respond_one(
         Pending::Impact(tau) => Found::Impact(tau),
         Pending::Overlap | Pending::None => Found::Overlap,
     };
-    resolve(boards, params, marble, found, touches, contacts)
+    resolve(boards, Some(near), params, marble, found, touches, contacts)
 }

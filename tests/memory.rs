@@ -45,7 +45,7 @@ static GLOBAL: Counting = Counting;
 fn memory_per_marble() {
     let n = 20_000;
     for (kind, collisions, bound) in [
-        (BenchScene::WalledBoard, false, 1_000),
+        (BenchScene::WalledBoard, false, 1_100),
         (BenchScene::WalledBoard, true, 4_000),
         (BenchScene::PourBox, true, 4_000),
         (BenchScene::Labyrinth, true, 4_000),
