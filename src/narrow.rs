@@ -285,10 +285,12 @@ impl NearPieces {
     }
 
     /// The one touch [`gather`] would find at the substep's start for a marble of radius
-    /// `r` at `x` (world), when the list can vouch that it is the only piece within reach
-    /// of every centre within `spread` of `x`: the list holds one piece, of a board that
-    /// does not move, covers those centres, and no other board comes within reach. `None`
-    /// when the list cannot tell or the piece is farther than `tol`.
+    /// `r` at `x` (world) moving at `v` under acceleration `a`, when the list can vouch that
+    /// it is the only piece within reach of the marble's whole substep of length `h` on it:
+    /// the list holds one piece, of a board that does not move, and covers every centre
+    /// the marble can reach sliding on the piece (its speed, and the acceleration the piece
+    /// leaves it, over `h`), and no other board comes within reach. `None` when the list
+    /// cannot tell or the piece is farther than `tol`.
     #[expect(
         clippy::too_many_arguments,
         reason = "a hot kernel taking plain values"
@@ -297,11 +299,12 @@ impl NearPieces {
         &self,
         boards: &[BoardSnapshot],
         x: Vec3,
+        v: Vec3,
+        a: Vec3,
+        h: f32,
         r: f32,
         tol: f32,
-        spread: f32,
         material: &Material,
-        hint: Vec3,
     ) -> Option<Touch> {
         let [id] = *self.pieces() else {
             return None;
@@ -309,6 +312,69 @@ impl NearPieces {
         let bi = self.board as usize;
         let b = boards.get(bi)?;
         if b.is_moving() {
+            return None;
+        }
+        let touch = if self.face_normal != Vec3::ZERO && b.pose_version == self.pose_version {
+            // A flat face where it was: the distance is affine in the centre.
+            let d = x - self.anchor_world;
+            if d.length() + tol >= self.reach {
+                return None;
+            }
+            let n = self.face_normal;
+            let gap = self.face_gap + n.dot(d);
+            if gap.abs() > tol {
+                return None;
+            }
+            Touch {
+                piece: id,
+                point: x - (r + gap) * n,
+                normal: n,
+                gap,
+                board_velocity: Vec3::ZERO,
+                surface_accel: 0.0,
+                board_spin: Vec3::ZERO,
+                material: material.combine(b),
+                convex: true,
+            }
+        } else {
+            let inv = b.rotation.conjugate();
+            let local = inv * (x - b.position);
+            if !self.covers(local, 0.0, tol) {
+                return None;
+            }
+            // As `gather` computes it.
+            let piece = b.geometry.piece(id.part(), id.sub());
+            let p = b.geometry.proximity(id.part(), &piece, local, inv * -v);
+            let gap = p.distance - r;
+            if gap > tol {
+                return None;
+            }
+            let point = b.rotation * p.point + b.position;
+            let normal = b.rotation * p.normal;
+            Touch {
+                piece: id,
+                point,
+                normal,
+                gap,
+                board_velocity: b.point_velocity(0.0, point),
+                surface_accel: b.surface_accel(0.0, point, normal),
+                board_spin: b.angular_velocity,
+                material: material.combine(b),
+                convex: piece.is_convex(),
+            }
+        };
+        // Where the marble can go: at most its speed, and the acceleration the piece
+        // leaves it (none into the piece), over the substep; the list and the other boards
+        // must leave nothing within reach of that.
+        let n = touch.normal;
+        let along = a - a.dot(n).min(0.0) * n;
+        let spread = (v.length() + 2.0 * along.length() * h) * h;
+        let clear = if b.pose_version == self.pose_version {
+            (x - self.anchor_world).length() + spread + tol < self.reach
+        } else {
+            self.covers(b.rotation.conjugate() * (x - b.position), spread, tol)
+        };
+        if !clear {
             return None;
         }
         let reach = r + tol + spread;
@@ -330,57 +396,7 @@ impl NearPieces {
                 None => false,
             }
         });
-        if !others_clear {
-            return None;
-        }
-        if self.face_normal != Vec3::ZERO && b.pose_version == self.pose_version {
-            // A flat face where it was: the distance is affine in the centre.
-            let d = x - self.anchor_world;
-            if d.length() + spread + tol >= self.reach {
-                return None;
-            }
-            let n = self.face_normal;
-            let gap = self.face_gap + n.dot(d);
-            if gap.abs() > tol {
-                return None;
-            }
-            return Some(Touch {
-                piece: id,
-                point: x - (r + gap) * n,
-                normal: n,
-                gap,
-                board_velocity: Vec3::ZERO,
-                surface_accel: 0.0,
-                board_spin: Vec3::ZERO,
-                material: material.combine(b),
-                convex: true,
-            });
-        }
-        let inv = b.rotation.conjugate();
-        let local = inv * (x - b.position);
-        if !self.covers(local, spread, tol) {
-            return None;
-        }
-        // As `gather` computes it.
-        let piece = b.geometry.piece(id.part(), id.sub());
-        let p = b.geometry.proximity(id.part(), &piece, local, inv * hint);
-        let gap = p.distance - r;
-        if gap > tol {
-            return None;
-        }
-        let point = b.rotation * p.point + b.position;
-        let normal = b.rotation * p.normal;
-        Some(Touch {
-            piece: id,
-            point,
-            normal,
-            gap,
-            board_velocity: b.point_velocity(0.0, point),
-            surface_accel: b.surface_accel(0.0, point, normal),
-            board_spin: b.angular_velocity,
-            material: material.combine(b),
-            convex: piece.is_convex(),
-        })
+        others_clear.then_some(touch)
     }
 
     /// Rebuilds the list around a marble of radius `r` at `x` (world, the substep's start):
@@ -840,24 +856,6 @@ pub fn earliest_impact(
         }
         let (c0, q0) = b.pose_at(path.t0);
         let moving = b.is_moving();
-        let list = NearPieces::of(near, bi);
-        // On a still board, every centre of the path lies within `spread` of the chord's
-        // middle; a list that covers that ball and holds only touched pieces leaves
-        // nothing to search.
-        let covered = match list {
-            Some(l) if !moving => {
-                let spread = 0.5 * (end - path.x).length() + bulge;
-                l.covers(q0.conjugate() * (0.5 * (path.x + end) - c0), spread, tol)
-            }
-            _ => false,
-        };
-        if covered && list.is_some_and(|l| l.pieces().iter().all(|&p| touching.contains(p))) {
-            continue;
-        }
-        // Everything the marble can reach this substep, in the board's frame; a moving
-        // board sees it through both end poses and, if it turns, a margin for the turn.
-        let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());
-        let mut centre_query = transform_aabb(&centres, q0.conjugate() * -c0, q0.conjugate());
         // The rate of the centre's distance to a flat face with normal n0 (world, at the
         // path's start) is n(τ)·ẏ(τ) with |n(τ) − n0| ≤ |ω| τ: bounded by the normal
         // component of the relative motion plus the turning terms (module docs).
@@ -874,8 +872,41 @@ pub fn earliest_impact(
                 + w * span * (u0.length() + span * bb.length() + curl)
         };
         // Speed bound of the marble relative to the board's frame (a still board: the
-        // marble's own speed bound).
-        let mut speed = marble_speed;
+        // marble's own speed bound). For a moving board: the distance to a piece changes
+        // no faster than the marble's position in the board's frame, y = Rᵀ(x − c), whose
+        // rate is the marble's velocity relative to the board's material point under it:
+        //   ẏ = Rᵀ(u0 + τ (a − ω × (v − v_b)) − ½ τ² ω × a),
+        //   u0 = v − v_b − ω × (x − c) at the path's start.
+        // A marble riding a turning board has u0 ≈ 0, so the bound stays tight where
+        // the board's own speed would make conservative advancement crawl.
+        let speed = if moving {
+            u0.length() + span * bb.length() + curl
+        } else {
+            marble_speed
+        };
+        if speed <= 0.0 {
+            continue;
+        }
+        // Whether the marble's list covers every centre of the path in the board's frame:
+        // on a still board they lie within half the chord and the bulge of the chord's
+        // middle, on a moving one within `speed · span` of the start. A list that covers
+        // them and holds only touched pieces leaves nothing to search.
+        let list = NearPieces::of(near, bi);
+        let covered = list.is_some_and(|l| {
+            if moving {
+                l.covers(q0.conjugate() * (path.x - c0), speed * span, tol)
+            } else {
+                let spread = 0.5 * (end - path.x).length() + bulge;
+                l.covers(q0.conjugate() * (0.5 * (path.x + end) - c0), spread, tol)
+            }
+        });
+        if covered && list.is_some_and(|l| l.pieces().iter().all(|&p| touching.contains(p))) {
+            continue;
+        }
+        // Everything the marble can reach this substep, in the board's frame; a moving
+        // board sees it through both end poses and, if it turns, a margin for the turn.
+        let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());
+        let mut centre_query = transform_aabb(&centres, q0.conjugate() * -c0, q0.conjugate());
         if moving {
             let (c1, q1) = b.pose_at(path.t0 + span);
             let q_end = transform_aabb(&world, q1.conjugate() * -c1, q1.conjugate());
@@ -895,17 +926,6 @@ pub fn earliest_impact(
                 centre_query.mins - Vec3::splat(turn),
                 centre_query.maxs + Vec3::splat(turn),
             );
-            // The distance to a piece changes no faster than the marble's position in the
-            // board's frame, y = Rᵀ(x − c), whose rate is the marble's velocity relative to
-            // the board's material point under it:
-            //   ẏ = Rᵀ(u0 + τ (a − ω × (v − v_b)) − ½ τ² ω × a),
-            //   u0 = v − v_b − ω × (x − c) at the path's start.
-            // A marble riding a turning board has u0 ≈ 0, so the bound stays tight where
-            // the board's own speed would make conservative advancement crawl.
-            speed = u0.length() + span * bb.length() + curl;
-        }
-        if speed <= 0.0 {
-            continue;
         }
         let limit = best.map_or(span, |(t, _)| t);
         let each = |part: usize, sub: u32, piece: &Piece| {
@@ -968,15 +988,6 @@ pub fn earliest_impact(
             // caller advances there and searches again.
             best = Some((tau, PieceId::new(bi, part, sub)));
         };
-        // A moving board: the list must cover the centres' bounds in its frame.
-        let covered = covered
-            || (moving
-                && list.is_some_and(|l| {
-                    let far = (centre_query.mins - l.anchor)
-                        .abs()
-                        .max((centre_query.maxs - l.anchor).abs());
-                    l.covers(l.anchor + far, 0.0, tol)
-                }));
         match list {
             Some(l) if covered => l.visit(&b.geometry, each),
             _ => b.geometry.for_each_piece(&query, each),
@@ -1135,8 +1146,16 @@ mod tests {
                 );
                 assert_eq!(searched.is_complete(), listed.is_complete());
                 compared += 1;
-                if let Some(t) = list.lone_touch(&cache.boards, x, R, tol, 0.0, &material, Vec3::Y)
-                {
+                if let Some(t) = list.lone_touch(
+                    &cache.boards,
+                    x,
+                    -Vec3::Y,
+                    Vec3::ZERO,
+                    0.0,
+                    R,
+                    tol,
+                    &material,
+                ) {
                     let [s] = searched.as_slice() else {
                         panic!("lone touch {t:?} where the search found {searched:?}");
                     };
@@ -1195,8 +1214,7 @@ mod tests {
             };
             let mut list = NearPieces::default();
             list.rebuild(&cache, x0, R, tol, 4.0 * R);
-            let spread = (m.v0.length() + 2.0 * m.a.length() * p.h) * p.h;
-            let Some(tc) = list.lone_touch(&cache.boards, x0, R, tol, spread, &m.material, -m.v0)
+            let Some(tc) = list.lone_touch(&cache.boards, x0, m.v0, m.a, p.h, R, tol, &m.material)
             else {
                 continue;
             };

@@ -13,8 +13,9 @@ use crate::narrow::{
 use crate::response::{MarbleIn, SubstepParams, resolve_resting};
 
 /// A rebuilt [`NearPieces`] list reaches this many substeps of the marble's motion beyond
-/// it (within half a radius and four radii): rebuilt every few substeps at most, short
-/// enough to hold only the pieces around the marble.
+/// it (within two and eight radii; a marble moving more than four radii a substep gets
+/// none): rebuilt every few substeps at most, short enough to hold only the pieces around
+/// the marble.
 const NEAR_SKIN: f32 = 4.0;
 
 /// For every marble: the board pieces it touches at the substep's start, each classified
@@ -76,11 +77,11 @@ pub fn detect_contacts(
         };
         // The board pieces near the marble should cover where it can go this substep
         // (each query checks that they do, and searches the boards where not).
-        let spread = (start.velocity.length() + 2.0 * acceleration.0.length() * h) * h;
         let near = near.bypass_change_detection();
-        if !near.is_fresh(&cache, start.position, r, spread, tol) {
-            if spread < 2.0 * r {
-                let skin = (NEAR_SKIN * spread).clamp(2.0 * r, 8.0 * r);
+        if !near.is_fresh(&cache, start.position, r, start.velocity.length() * h, tol) {
+            let motion = (start.velocity.length() + acceleration.0.length() * h) * h;
+            if motion < 4.0 * r {
+                let skin = (NEAR_SKIN * motion).clamp(2.0 * r, 8.0 * r);
                 near.rebuild(&cache, start.position, r, tol, skin);
             } else {
                 // Too fast for a list to last: search the boards.
@@ -94,11 +95,12 @@ pub fn detect_contacts(
             && let Some(tc) = near.lone_touch(
                 boards,
                 start.position,
+                start.velocity,
+                acceleration.0,
+                h,
                 r,
                 tol,
-                spread,
                 &material,
-                -start.velocity,
             )
             && tc.convex
         {
