@@ -38,10 +38,12 @@
 //! frame. While the marble stays within the list's reach of that spot of the board, its
 //! touches and impacts need only the listed pieces — the same answers, bit for bit, as a
 //! search of the board (the pieces keep the search's order) — and detection rebuilds the
-//! list when the marble leaves it. When the list holds one flat face of a still board, it
-//! also gives the touch in closed form ([`NearPieces::lone_touch`]), and a marble resting
-//! or sliding there is resolved in closed form
-//! ([`crate::response::resolve_resting`]): no search at all in the commonest case.
+//! list when the marble leaves it. When the list holds one piece of a still board and
+//! nothing else is within reach of the marble's substep, it gives the touch directly
+//! ([`NearPieces::lone_touch`]; in closed form over a flat face), and a marble resting or
+//! sliding there is resolved in closed form ([`crate::response::resolve_resting`]; a
+//! spinning one by the event loop on that one touch): no search at all in the commonest
+//! case.
 
 use std::sync::Arc;
 
@@ -285,7 +287,8 @@ impl NearPieces {
     }
 
     /// The one touch [`gather`] would find at the substep's start for a marble of radius
-    /// `r` at `x` (world) moving at `v` under acceleration `a`, when the list can vouch that
+    /// `r` at `x` (world) moving at `v` under acceleration `a` (and friction, when it
+    /// `spins`), when the list can vouch that
     /// it is the only piece within reach of the marble's whole substep of length `h` on it:
     /// the list holds one piece, of a board that does not move, and covers every centre
     /// the marble can reach sliding on the piece (its speed, and the acceleration the piece
@@ -305,6 +308,7 @@ impl NearPieces {
         r: f32,
         tol: f32,
         material: &Material,
+        spins: bool,
     ) -> Option<Touch> {
         let [id] = *self.pieces() else {
             return None;
@@ -364,11 +368,18 @@ impl NearPieces {
             }
         };
         // Where the marble can go: at most its speed, and the acceleration the piece
-        // leaves it (none into the piece), over the substep; the list and the other boards
-        // must leave nothing within reach of that.
+        // leaves it (none into the piece; friction adds at most μ times the normal force
+        // for a marble that spins), over the substep; the list and the other boards must
+        // leave nothing within reach of that.
         let n = touch.normal;
-        let along = a - a.dot(n).min(0.0) * n;
-        let spread = (v.length() + 2.0 * along.length() * h) * h;
+        let into = a.dot(n).min(0.0);
+        let along = a - into * n;
+        let grip = if spins {
+            touch.material.friction * -into
+        } else {
+            0.0
+        };
+        let spread = (v.length() + 2.0 * (along.length() + grip) * h) * h;
         let clear = if b.pose_version == self.pose_version {
             (x - self.anchor_world).length() + spread + tol < self.reach
         } else {
@@ -1155,6 +1166,7 @@ mod tests {
                     R,
                     tol,
                     &material,
+                    false,
                 ) {
                     let [s] = searched.as_slice() else {
                         panic!("lone touch {t:?} where the search found {searched:?}");
@@ -1214,8 +1226,17 @@ mod tests {
             };
             let mut list = NearPieces::default();
             list.rebuild(&cache, x0, R, tol, 4.0 * R);
-            let Some(tc) = list.lone_touch(&cache.boards, x0, m.v0, m.a, p.h, R, tol, &m.material)
-            else {
+            let Some(tc) = list.lone_touch(
+                &cache.boards,
+                x0,
+                m.v0,
+                m.a,
+                p.h,
+                R,
+                tol,
+                &m.material,
+                false,
+            ) else {
                 continue;
             };
             let mut fast = Contacts::default();

@@ -3,14 +3,15 @@
 use bevy_ecs::prelude::*;
 
 use crate::components::{
-    Acceleration, AngularVelocity, Contact, ContactKind, Contacts, Marble, Pending, Position,
-    PositionCarry, Quarantined, Radius, Restitution, StepStart, Velocity, compensated_add,
+    Acceleration, AngularVelocity, Contact, ContactKind, Contacts, Friction, Marble, Pending,
+    Position, PositionCarry, Quarantined, Radius, Restitution, RollingResistance, SpinDamping,
+    StepStart, Velocity, compensated_add,
 };
 use crate::config::StepConfig;
 use crate::narrow::{
     BoardCache, Material, NearPieces, Path, TouchList, earliest_impact, gather, touch_tolerance,
 };
-use crate::response::{MarbleIn, SubstepParams, resolve_resting};
+use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting};
 
 /// A rebuilt [`NearPieces`] list reaches this many substeps of the marble's motion beyond
 /// it (within two and eight radii; a marble moving more than four radii a substep gets
@@ -22,8 +23,9 @@ const NEAR_SKIN: f32 = 4.0;
 /// by its normal closing speed *before this step's forces* (a collision above
 /// `restitution_threshold`, else a contact); if it touches nothing, the first impact along
 /// its free path (`ccd`) or its overlap at the end of the path (no `ccd`). Marbles with
-/// anything to resolve are flagged for the response stage, except those resting or
-/// sliding on one piece with nothing else near ([`resolve_resting`]), resolved here. The
+/// anything to resolve are flagged for the response stage, except those resting, sliding
+/// or rolling on one piece with nothing else near ([`resolve_resting`], or the event loop
+/// on that one touch for a marble that spins), resolved here. The
 /// marble's [`NearPieces`] list is rebuilt when it no longer covers the substep.
 pub fn detect_contacts(
     config: Res<StepConfig>,
@@ -34,12 +36,17 @@ pub fn detect_contacts(
                 &mut Position,
                 &mut PositionCarry,
                 &mut Velocity,
-                Has<AngularVelocity>,
+                Option<&mut AngularVelocity>,
             ),
             &StepStart,
             &Acceleration,
             &Radius,
-            &Restitution,
+            (
+                &Restitution,
+                &Friction,
+                Option<&RollingResistance>,
+                Option<&SpinDamping>,
+            ),
             (&mut Contacts, &mut NearPieces),
         ),
         (With<Marble>, Without<Quarantined>),
@@ -50,18 +57,28 @@ pub fn detect_contacts(
     let params = SubstepParams::from_config(&config, h);
     let each = |touches: &mut TouchList,
                 (
-        (mut position, mut carry, mut velocity, spins),
+        (mut position, mut carry, mut velocity, spin),
         start,
         acceleration,
         radius,
-        restitution,
+        (restitution, friction, rolling_resistance, spin_damping),
         (mut contacts, mut near),
     ): (
-        (Mut<Position>, Mut<PositionCarry>, Mut<Velocity>, bool),
+        (
+            Mut<Position>,
+            Mut<PositionCarry>,
+            Mut<Velocity>,
+            Option<Mut<AngularVelocity>>,
+        ),
         &StepStart,
         &Acceleration,
         &Radius,
-        &Restitution,
+        (
+            &Restitution,
+            &Friction,
+            Option<&RollingResistance>,
+            Option<&SpinDamping>,
+        ),
         (Mut<Contacts>, Mut<NearPieces>),
     )| {
         let contacts = contacts.bypass_change_detection();
@@ -73,8 +90,12 @@ pub fn detect_contacts(
         let tol = touch_tolerance(config.contact_tolerance, r, start.position);
         let material = Material {
             restitution: restitution.0,
-            ..Material::default()
+            friction: friction.0,
+            rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
+            spin_damping: spin_damping.map_or(0.0, |c| c.0),
         };
+        // The spin, when the marble spins (rolling on and an angular velocity).
+        let w0 = spin.as_ref().filter(|_| config.rolling).map(|w| w.0);
         // The board pieces near the marble should cover where it can go this substep
         // (each query checks that they do, and searches the boards where not).
         let near = near.bypass_change_detection();
@@ -88,10 +109,10 @@ pub fn detect_contacts(
                 *near = NearPieces::default();
             }
         }
-        // The commonest case, a marble resting or sliding on one piece with nothing else
-        // near, is resolved here in closed form (the response stage skips it).
+        // The commonest case, a marble resting, sliding or rolling on one piece with
+        // nothing else near, is resolved here (the response stage skips it): in closed
+        // form, or, for a marble that spins, by the event loop on that one touch.
         if config.ccd
-            && !(spins && config.rolling)
             && let Some(tc) = near.lone_touch(
                 boards,
                 start.position,
@@ -101,21 +122,40 @@ pub fn detect_contacts(
                 r,
                 tol,
                 &material,
+                w0.is_some(),
             )
             && tc.convex
         {
             let marble = MarbleIn {
                 x0: start.position,
                 v0: start.velocity,
-                w0: None,
+                w0,
                 a: acceleration.0,
                 r,
                 material,
             };
-            if let Some(out) = resolve_resting(boards, &params, &marble, &tc, contacts) {
+            let out = if w0.is_some() {
+                touches.clear();
+                touches.insert(tc, tol);
+                Some(resolve(
+                    boards,
+                    Some(&*near),
+                    &params,
+                    &marble,
+                    Found::Touching,
+                    touches,
+                    contacts,
+                ))
+            } else {
+                resolve_resting(boards, &params, &marble, &tc, contacts)
+            };
+            if let Some(out) = out {
                 (position.0, carry.0) =
                     compensated_add(config.compensated, start.position, start.carry, out.d);
                 velocity.0 = out.v;
+                if let Some(mut spin) = spin.filter(|_| config.rolling) {
+                    spin.0 = out.w;
+                }
                 return;
             }
             contacts.clear();
