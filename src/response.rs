@@ -403,7 +403,8 @@ fn resolve_with<const SPINS: bool>(
 /// rolling on one piece: a marble that does not spin, whose only touch at the substep's
 /// start is `tc` (on a convex piece of a still board, not overlapping it), that does not
 /// leave it, and for which nothing else is within reach of its substep (its
-/// [`NearPieces`] list says so: continuous collision has nothing to search). The same
+/// [`NearPieces`] list says so: continuous collision has nothing to search, and without
+/// it the end-of-substep check would find the marble on the piece's tangent plane). The same
 /// operations as the event loop in that case, without its searches: the response, the
 /// constrained acceleration, the exact path to the substep's end. `None` (and `contacts`
 /// to be rewritten) when the marble leaves the piece: the event loop handles that.
@@ -414,7 +415,7 @@ pub fn resolve_resting(
     tc: &Touch,
     contacts: &mut Contacts,
 ) -> Option<MarbleOut> {
-    debug_assert!(m.w0.is_none() && tc.convex && p.ccd);
+    debug_assert!(m.w0.is_none() && tc.convex);
     let sep = separation_speed(p.threshold);
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut s = State {

@@ -112,19 +112,18 @@ pub fn detect_contacts(
         // The commonest case, a marble resting, sliding or rolling on one piece with
         // nothing else near, is resolved here (the response stage skips it): in closed
         // form, or, for a marble that spins, by the event loop on that one touch.
-        if config.ccd
-            && let Some(tc) = near.lone_touch(
-                boards,
-                start.position,
-                start.velocity,
-                acceleration.0,
-                h,
-                r,
-                tol,
-                &material,
-                w0.is_some(),
-            )
-            && tc.convex
+        // (With or without continuous collision: nothing else is within reach.)
+        if let Some(tc) = near.lone_touch(
+            boards,
+            start.position,
+            start.velocity,
+            acceleration.0,
+            h,
+            r,
+            tol,
+            &material,
+            w0.is_some(),
+        ) && tc.convex
         {
             let marble = MarbleIn {
                 x0: start.position,
