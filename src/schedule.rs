@@ -67,7 +67,8 @@ pub fn substep_schedule() -> Schedule {
         boards::prepare_boards.in_set(MarbleSystems::PrepareBoards),
         forces::accumulate_forces.in_set(MarbleSystems::AccumulateForces),
         integrate::integrate.in_set(MarbleSystems::Integrate),
-        detect::detect_contacts.in_set(MarbleSystems::DetectContacts),
+        (detect::detect_contacts, detect::detect_contacts_spinning)
+            .in_set(MarbleSystems::DetectContacts),
         (
             respond::respond,
             respond::respond_spinning,

@@ -19,28 +19,81 @@ use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting};
 /// the marble.
 const NEAR_SKIN: f32 = 4.0;
 
-/// For every marble: the board pieces it touches at the substep's start, each classified
-/// by its normal closing speed *before this step's forces* (a collision above
-/// `restitution_threshold`, else a contact); if it touches nothing, the first impact along
-/// its free path (`ccd`) or its overlap at the end of the path (no `ccd`). Marbles with
-/// anything to resolve are flagged for the response stage, except those resting, sliding
-/// or rolling on one piece with nothing else near ([`resolve_resting`], or the event loop
-/// on that one touch for a marble that spins), resolved here. The
-/// marble's [`NearPieces`] list is rebuilt when it no longer covers the substep.
+/// For every marble that does not spin: the board pieces it touches at the substep's
+/// start, each classified by its normal closing speed *before this step's forces* (a
+/// collision above `restitution_threshold`, else a contact); if it touches nothing, the
+/// first impact along its free path (`ccd`) or its overlap at the end of the path (no
+/// `ccd`). Marbles with anything to resolve are flagged for the response stage, except
+/// those resting or sliding on one piece with nothing else near ([`resolve_resting`]),
+/// resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
+/// the substep.
 pub fn detect_contacts(
     config: Res<StepConfig>,
     cache: Res<BoardCache>,
     mut marbles: Query<
         (
-            (
-                &mut Position,
-                &mut PositionCarry,
-                &mut Velocity,
-                Option<&mut AngularVelocity>,
-            ),
+            (Mut<Position>, Mut<PositionCarry>, Mut<Velocity>),
             &StepStart,
             &Acceleration,
             &Radius,
+            &Restitution,
+            (&mut Contacts, &mut NearPieces),
+        ),
+        (With<Marble>, Without<Quarantined>, Without<AngularVelocity>),
+    >,
+) {
+    let stage = Stage::new(&config, &cache);
+    let each = |touches: &mut TouchList,
+                (
+        (position, carry, velocity),
+        start,
+        acceleration,
+        radius,
+        restitution,
+        (contacts, near),
+    ): (
+        (Mut<Position>, Mut<PositionCarry>, Mut<Velocity>),
+        &StepStart,
+        &Acceleration,
+        &Radius,
+        &Restitution,
+        (Mut<Contacts>, Mut<NearPieces>),
+    )| {
+        let material = Material {
+            restitution: restitution.0,
+            ..Material::default()
+        };
+        let marble = (position, carry, velocity, None);
+        stage.detect(
+            touches,
+            marble,
+            start,
+            acceleration,
+            radius.0,
+            material,
+            contacts,
+            near,
+        );
+    };
+    super::for_each_marble!(marbles, each);
+}
+
+/// [`detect_contacts`] for marbles that carry an [`AngularVelocity`]: with rolling on, a
+/// marble rolling on one piece with nothing else near is resolved here by the event loop
+/// on that one touch (friction included). A scene without spinning marbles gives this
+/// system nothing to iterate.
+pub fn detect_contacts_spinning(
+    config: Res<StepConfig>,
+    cache: Res<BoardCache>,
+    mut marbles: Query<
+        (
+            (
+                Mut<Position>,
+                Mut<PositionCarry>,
+                Mut<Velocity>,
+                Mut<AngularVelocity>,
+            ),
+            (&StepStart, &Acceleration, &Radius),
             (
                 &Restitution,
                 &Friction,
@@ -52,27 +105,21 @@ pub fn detect_contacts(
         (With<Marble>, Without<Quarantined>),
     >,
 ) {
-    let boards = cache.boards.as_slice();
-    let h = cache.h;
-    let params = SubstepParams::from_config(&config, h);
+    let stage = Stage::new(&config, &cache);
     let each = |touches: &mut TouchList,
                 (
-        (mut position, mut carry, mut velocity, spin),
-        start,
-        acceleration,
-        radius,
+        (position, carry, velocity, spin),
+        (start, acceleration, radius),
         (restitution, friction, rolling_resistance, spin_damping),
-        (mut contacts, mut near),
+        (contacts, near),
     ): (
         (
             Mut<Position>,
             Mut<PositionCarry>,
             Mut<Velocity>,
-            Option<Mut<AngularVelocity>>,
+            Mut<AngularVelocity>,
         ),
-        &StepStart,
-        &Acceleration,
-        &Radius,
+        (&StepStart, &Acceleration, &Radius),
         (
             &Restitution,
             &Friction,
@@ -81,29 +128,87 @@ pub fn detect_contacts(
         ),
         (Mut<Contacts>, Mut<NearPieces>),
     )| {
-        let contacts = contacts.bypass_change_detection();
-        contacts.clear();
-        if boards.is_empty() {
-            return;
-        }
-        let r = radius.0;
-        let tol = touch_tolerance(config.contact_tolerance, r, start.position);
         let material = Material {
             restitution: restitution.0,
             friction: friction.0,
             rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
             spin_damping: spin_damping.map_or(0.0, |c| c.0),
         };
+        let marble = (position, carry, velocity, Some(spin));
+        stage.detect(
+            touches,
+            marble,
+            start,
+            acceleration,
+            radius.0,
+            material,
+            contacts,
+            near,
+        );
+    };
+    super::for_each_marble!(marbles, each);
+}
+
+/// What every marble's detection shares in a substep.
+struct Stage<'a> {
+    config: &'a StepConfig,
+    cache: &'a BoardCache,
+    params: SubstepParams,
+}
+
+/// A marble's motion state, as the detection systems hand it over.
+type MarbleState<'w> = (
+    Mut<'w, Position>,
+    Mut<'w, PositionCarry>,
+    Mut<'w, Velocity>,
+    Option<Mut<'w, AngularVelocity>>,
+);
+
+impl<'a> Stage<'a> {
+    fn new(config: &'a StepConfig, cache: &'a BoardCache) -> Self {
+        Stage {
+            config,
+            cache,
+            params: SubstepParams::from_config(config, cache.h),
+        }
+    }
+
+    /// One marble's detection (see [`detect_contacts`]).
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a marble's components, handed over one by one"
+    )]
+    #[inline]
+    fn detect(
+        &self,
+        touches: &mut TouchList,
+        (mut position, mut carry, mut velocity, spin): MarbleState<'_>,
+        start: &StepStart,
+        acceleration: &Acceleration,
+        r: f32,
+        material: Material,
+        mut contacts: Mut<Contacts>,
+        mut near: Mut<NearPieces>,
+    ) {
+        let (config, cache, params) = (self.config, self.cache, &self.params);
+        let boards = cache.boards.as_slice();
+        let h = cache.h;
+        let contacts = contacts.bypass_change_detection();
+        contacts.clear();
+        if boards.is_empty() {
+            return;
+        }
+        let tol = touch_tolerance(config.contact_tolerance, r, start.position);
         // The spin, when the marble spins (rolling on and an angular velocity).
         let w0 = spin.as_ref().filter(|_| config.rolling).map(|w| w.0);
         // The board pieces near the marble should cover where it can go this substep
         // (each query checks that they do, and searches the boards where not).
         let near = near.bypass_change_detection();
-        if !near.is_fresh(&cache, start.position, r, start.velocity.length() * h, tol) {
+        if !near.is_fresh(cache, start.position, r, start.velocity.length() * h, tol) {
             let motion = (start.velocity.length() + acceleration.0.length() * h) * h;
             if motion < 4.0 * r {
                 let skin = (NEAR_SKIN * motion).clamp(2.0 * r, 8.0 * r);
-                near.rebuild(&cache, start.position, r, tol, skin);
+                near.rebuild(cache, start.position, r, tol, skin);
             } else {
                 // Too fast for a list to last: search the boards.
                 *near = NearPieces::default();
@@ -139,14 +244,14 @@ pub fn detect_contacts(
                 Some(resolve(
                     boards,
                     Some(&*near),
-                    &params,
+                    params,
                     &marble,
                     Found::Touching,
                     touches,
                     contacts,
                 ))
             } else {
-                resolve_resting(boards, &params, &marble, &tc, contacts)
+                resolve_resting(boards, params, &marble, &tc, contacts)
             };
             if let Some(out) = out {
                 (position.0, carry.0) =
@@ -167,10 +272,7 @@ pub fn detect_contacts(
             start.position,
             r,
             tol,
-            &Material {
-                restitution: restitution.0,
-                ..Material::default()
-            },
+            &material,
             -start.velocity,
             touches,
         );
@@ -214,10 +316,7 @@ pub fn detect_contacts(
                 position.0,
                 r,
                 tol_end,
-                &Material {
-                    restitution: restitution.0,
-                    ..Material::default()
-                },
+                &material,
                 -start.velocity,
                 touches,
             );
@@ -225,6 +324,5 @@ pub fn detect_contacts(
                 contacts.pending = Pending::Overlap;
             }
         }
-    };
-    super::for_each_marble!(marbles, each);
+    }
 }
