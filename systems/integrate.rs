@@ -46,7 +46,9 @@ pub fn integrate(
         velocity.0 += dv;
     };
     #[cfg(feature = "parallel")]
-    marbles.par_iter_mut().for_each(each);
-    #[cfg(not(feature = "parallel"))]
+    if marbles.iter().len() >= super::PARALLEL_MIN {
+        marbles.par_iter_mut().for_each(each);
+        return;
+    }
     marbles.iter_mut().for_each(each);
 }

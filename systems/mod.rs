@@ -15,18 +15,29 @@
 //! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities |
 //! | `Finish` | `forces.rs` | on the last substep: clear forces, quarantine non-finite marbles |
 
+/// With the `parallel` feature, queries of fewer marbles than this run in order: handing
+/// a few marbles to the task pool costs more than their work (a study of thousands of
+/// one-marble scenes ran ten times slower).
+#[cfg(feature = "parallel")]
+pub(crate) const PARALLEL_MIN: usize = 1024;
+
 /// Runs `each(&mut touches, item)` for every item of the marble query `query`, with a
 /// scratch [`TouchList`](crate::narrow::TouchList): on bevy's compute task pool with the
-/// `parallel` feature (one scratch list per batch), in order otherwise. Each marble's work
-/// depends on that marble alone, so both give the same bits.
+/// `parallel` feature (one scratch list per batch) when there are at least
+/// [`PARALLEL_MIN`] marbles, in order otherwise. Each marble's work depends on that marble
+/// alone, so both give the same bits.
 macro_rules! for_each_marble {
     ($query:expr, $each:expr) => {{
         #[cfg(feature = "parallel")]
-        $query
-            .par_iter_mut()
-            .for_each_init(crate::narrow::TouchList::default, $each);
+        let parallel = $query.iter().len() >= crate::systems::PARALLEL_MIN;
         #[cfg(not(feature = "parallel"))]
-        {
+        let parallel = false;
+        if parallel {
+            #[cfg(feature = "parallel")]
+            $query
+                .par_iter_mut()
+                .for_each_init(crate::narrow::TouchList::default, $each);
+        } else {
             let mut touches = crate::narrow::TouchList::default();
             for item in &mut $query {
                 ($each)(&mut touches, item);
