@@ -576,6 +576,23 @@ pub struct Material {
 }
 
 impl Material {
+    /// A marble's coefficients from its components (rolling resistance and spin damping
+    /// are zero where the marble has none).
+    #[inline]
+    pub fn of_marble(
+        restitution: &crate::components::Restitution,
+        friction: &crate::components::Friction,
+        rolling_resistance: Option<&crate::components::RollingResistance>,
+        spin_damping: Option<&crate::components::SpinDamping>,
+    ) -> Material {
+        Material {
+            restitution: restitution.0,
+            friction: friction.0,
+            rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
+            spin_damping: spin_damping.map_or(0.0, |c| c.0),
+        }
+    }
+
     /// The pair's material: the average of each coefficient (the contract's default rule).
     #[inline]
     pub fn combine(&self, b: &BoardSnapshot) -> Material {

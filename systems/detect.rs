@@ -128,12 +128,7 @@ pub fn detect_contacts_spinning(
         ),
         (Mut<Contacts>, Mut<NearPieces>),
     )| {
-        let material = Material {
-            restitution: restitution.0,
-            friction: friction.0,
-            rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
-            spin_damping: spin_damping.map_or(0.0, |c| c.0),
-        };
+        let material = Material::of_marble(restitution, friction, rolling_resistance, spin_damping);
         let marble = (position, carry, velocity, Some(spin));
         stage.detect(
             touches,

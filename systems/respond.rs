@@ -131,12 +131,7 @@ pub fn respond_spinning(
             w0: config.rolling.then_some(spin.0),
             a: acceleration.0,
             r: radius.0,
-            material: Material {
-                restitution: restitution.0,
-                friction: friction.0,
-                rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
-                spin_damping: spin_damping.map_or(0.0, |c| c.0),
-            },
+            material: Material::of_marble(restitution, friction, rolling_resistance, spin_damping),
         };
         let out = respond_one(boards, near, &params, &marble, &mut contacts, touches);
         (position.0, carry.0) =
