@@ -4,7 +4,7 @@
 //! marble moved at 5 cm/s or more (checked every step) and the wall time.
 //!
 //! `cargo run --release --example marble_pile -- [MARBLES] [SUBSTEPS] [SOLVER_PASSES]
-//! [SEED] [SECONDS]` (defaults: 1000, the scene's 8 substeps and 30 passes, the scene's
+//! [SEED] [SECONDS]` (defaults: 1000, the scene's 8 substeps and 15 passes, the scene's
 //! own start, 6 s). A SEED nudges every marble by up to 5 µm: another start of the same
 //! pour. Try fewer substeps to see why the scene uses 8 (README, "Many marbles").
 

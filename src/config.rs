@@ -223,9 +223,10 @@ pub struct StepConfig {
     /// Marbles collide with each other ([`crate::pairs`]). Default `false`: the
     /// marble–marble stage does not run and costs nothing.
     pub marble_collisions: bool,
-    /// Gauss–Seidel passes of the marble–marble contact solver per substep (warm started
-    /// from the previous substep's impulses; it stops early once converged). Default 10;
-    /// sensible 4–50: piles deeper than a few marbles settle faster with more.
+    /// Passes of the marble–marble contact solver per substep (projected Gauss–Seidel,
+    /// over-relaxed, warm started from the previous substep's impulses; it stops early once
+    /// converged). Default 10; sensible 4–50: piles deeper than a few marbles settle faster
+    /// with more (the 1,000-marble pour of bench scene (b) uses 15 at 8 substeps).
     pub solver_iterations: u32,
 }
 

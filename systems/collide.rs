@@ -205,7 +205,7 @@ pub fn collide_marbles(
         board_touches(solver, &cache, body as u32, contacts, restitution.0, h, h);
     }
     solver.touch_start.push(solver.board_touches.len() as u32);
-    solver.resolve_impacts(&params, &mut recorded);
+    solver.resolve_impacts(&params, &cache.boards, &mut recorded);
     for (k, (_, (mut position, mut carry, mut velocity), _)) in marbles.iter_mut().enumerate() {
         if !solver.changed[k] {
             continue;
