@@ -1147,10 +1147,13 @@ impl PairSolver {
             );
             let mut check = |i: u32, j: u32| {
                 let (i, j) = (i.min(j), i.max(j));
-                if i == j || known.binary_search(&(i, j)).is_ok() {
+                if i == j {
                     return;
                 }
-                if let Some(row) = late_row(bodies, event, i, j, p) {
+                // Most candidates do not overlap: the distance test comes first.
+                if let Some(row) = late_row(bodies, event, i, j, p)
+                    && known.binary_search(&(i, j)).is_err()
+                {
                     late.push(row);
                 }
             };
@@ -1179,10 +1182,10 @@ impl PairSolver {
                 self.scratch_grid.pairs(&self.scratch_bound, &mut check);
             }
         }
-        // A pair that collided can meet again when one of them hits something else later
-        // in the substep (a marble knocked onto the floor rebounds into the one that
-        // knocked it): a collided pair found approaching and overlapping at the end is
-        // traced back to its new meeting.
+        // A pair already among the rows can meet (again) when one of them is hit later in
+        // the substep (a marble knocked onto the floor rebounds into the one that knocked
+        // it): such a pair found approaching and overlapping at the end is traced back to
+        // its new meeting.
         for row in &self.rows {
             let (i, j) = (row.i as usize, row.j as usize);
             if !(self.changed[i] || self.changed[j]) || self.event[i].max(self.event[j]) <= row.t {
