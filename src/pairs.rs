@@ -56,8 +56,9 @@
 //!    the marbles consistently with them and the marble–board response handles the boards
 //!    exactly as for a lone marble: a marble resting on another stays where it is.
 //! 5. **Overlap** beyond a small slop (0.2% of the smaller radius) is projected out of
-//!    positions, half of it per pass and at most a quarter of the radius (mass-weighted;
-//!    boards do not move), without touching velocities, so no energy is added for it.
+//!    positions, half of it per pass and at most a quarter of the radius, and at most one
+//!    radius per marble in all (mass-weighted; boards do not move), without touching
+//!    velocities, so no energy is added for it.
 //!
 //! **After the marble–board response** ([`PairSolver::find_impacts`],
 //! [`PairSolver::resolve_impacts`]; stage `CollideMarbles`), with continuous collision: a
@@ -78,18 +79,19 @@
 //! instead of spreading it over the line, every impulse conserves momentum (boards aside)
 //! and none adds energy. Every impact found is resolved; only what they pass on is capped.
 //! Marbles a collision sends off their free paths are then checked, on the end positions,
-//! in a few rounds: against the boards (a marble knocked onto a floor it did not touch
-//! rebounds there, on its straight path since its last impact), against marbles the
+//! in a few rounds: against the boards (the straight path since its last impact is
+//! searched for its earliest board impact, so a marble knocked onto a floor it did not
+//! touch rebounds there), against marbles the
 //! broad phase did not pair with them, and against a marble they already met when one of
 //! the two was hit again later (the floor's rebound sends it back into the marble that
 //! knocked it): each such pair is traced back along the new straight paths to its meeting.
 //!
 //! Piles need short substeps: bench scene (b) uses 8 substeps of a 1/60 s step and 15
 //! (over-relaxed) solver passes; over fourteen starts of its 1,000-marble pour the last
-//! marble above 5 cm/s stopped by 4.8 s. With fewer substeps the passes do not carry a
+//! marble above 5 cm/s stopped by 5.0 s. With fewer substeps the passes do not carry a
 //! ten-layer pile's weight down within a substep, and the pile keeps stirring at a few
-//! cm/s (overlaps about 1% of the radius at 4 substeps, 3% at 2, 30% at 1, where whole
-//! columns land within one step; see the README's measurements). Soft contacts in solver
+//! cm/s (overlaps about 1% of the radius at 4 substeps, 4–5% at 2, 30–45% at 1, where
+//! whole columns land within one step; see the README's measurements). Soft contacts in solver
 //! substeps (Box2D v3's soft step: 30 Hz contacts, damping ratio 10, four solver
 //! substeps of a 1/60 s step) were tried and measured: under a column of six 8 mm marbles
 //! the lowest contact sagged by 0.45 r: a soft contact sags in proportion to its load
@@ -109,19 +111,19 @@ use glam::{IVec3, Vec3, Vec4};
 
 use crate::components::ContactKind;
 use crate::geometry::PieceId;
-use crate::narrow::{BoardSnapshot, Material, TouchList};
+use crate::narrow::{BoardSnapshot, Material, Path, TouchList};
 
 /// Overlap left alone by the position projection, as a fraction of the smaller radius.
 pub const PAIR_SLOP: f32 = 2e-3;
 
 /// Share of an overlap the projection removes per pass.
 const PROJECTION: f32 = 0.5;
-/// Most a pass moves a marble apart, as a fraction of the radius. With
-/// [`PROJECTION_PASSES`] passes a marble moves at most one radius per substep: a marble
-/// that does not touch a board is more than a radius from it, so its centre never crosses
-/// a board however thin (the board stage pushes it back out), while a crash's deep overlaps
-/// go within a few substeps (a fiftieth of the radius per pass, as before, left pairs of a
-/// one-substep pour 1.9 r inside each other for good).
+/// Most a pass moves a pair apart, as a fraction of the smaller radius; and however many
+/// contacts push it, a marble moves at most one radius in a substep's projection. A
+/// marble that does not touch a board is more than a radius from it, so its centre never
+/// crosses a board however thin (the board stage pushes it back out), while a crash's deep
+/// overlaps go within a few substeps (a fiftieth of the radius per pass, as before, left
+/// pairs of a one-substep pour 1.9 r inside each other for good).
 const MAX_PROJECTION: f32 = 0.25;
 
 /// Extra room around each marble's free path in the broad phase, as a fraction of its
@@ -150,10 +152,14 @@ const LATE_ROUNDS: usize = 4;
 
 /// Over-relaxation of the contact passes (projected successive over-relaxation; 1 is plain
 /// Gauss–Seidel, and it converges for any value below 2). Measured on the 1,000-marble
-/// pour at 8 substeps over thirteen starts: 15 passes at 1.5 settle it by 4.8 s, as 30
+/// pour at 8 substeps over thirteen nudged starts: 15 passes at 1.5 settle it by 4.8 s, as 30
 /// plain passes do (by 5.3 s), for about 20% less time; 15 plain passes leave it stirring,
-/// 10 at 1.5 settle some starts only near 6 s, and 1.7 is no better.
+/// 10 at 1.5 settle some starts only near 6 s, and 1.7 is no better. (With the impact
+/// stage's later board search, 15 at 1.5 settled fourteen starts by 5.0 s.)
 const RELAXATION: f32 = 1.5;
+
+/// Most board impacts followed per marble when collisions sent it off its path.
+const BOARD_IMPACTS: usize = 4;
 
 /// Position-projection passes per substep.
 const PROJECTION_PASSES: usize = 4;
@@ -726,6 +732,8 @@ pub struct PairSolver {
     warm_next: KeyMap,
     vel: Vec<Vec3>,
     inv: Vec<f32>,
+    /// Projection each marble may still move this substep.
+    push_left: Vec<f32>,
     pair_gs: Vec<PairGs>,
     board_gs: Vec<BoardGs>,
     /// Bodies whose state the stage changed.
@@ -847,13 +855,18 @@ impl PairSolver {
         if self.collide(p, true) {
             // Collisions moved marbles off their free paths; what they run into there,
             // boards and marbles, is found and resolved in a few rounds.
+            let mut settled = false;
             for _ in 0..LATE_ROUNDS {
                 self.onto_boards(p, boards);
                 if !self.late_overlaps(p) {
+                    settled = true;
                     break;
                 }
             }
-            self.onto_boards(p, boards);
+            if !settled {
+                // The last round's collisions may have sent marbles into boards.
+                self.onto_boards(p, boards);
+            }
         }
         for row in &self.rows {
             if row.collided && row.kind != Found::Start {
@@ -998,6 +1011,7 @@ impl PairSolver {
         self.board_gs.reserve(touches);
         self.vel.reserve(n);
         self.inv.reserve(n);
+        self.push_left.reserve(n);
         self.warm.reserve(pairs + touches);
         self.warm_next.reserve(pairs + touches);
         out.list.reserve(pairs);
@@ -1020,7 +1034,8 @@ impl PairSolver {
 
     /// Step 3 of the module docs: the cascade of exact two-body impacts. A marble the
     /// cascade drives into a board it touches bounces off that board in turn (the board's
-    /// restitution, the board not moving), so the cascade never pushes a marble into a floor.
+    /// restitution, the board not moving); boards it did not touch are the impact stage's
+    /// [`PairSolver::onto_boards`].
     /// Returns whether any marble collided.
     fn collide(&mut self, p: &PairParams, shift: bool) -> bool {
         let n = self.bodies.len();
@@ -1111,10 +1126,11 @@ impl PairSolver {
     }
 
     /// After collisions moved marbles off their free paths, pairs that overlap at the end
-    /// of the substep and were not among the rows (the broad phase saw the free paths) are
-    /// found on the end positions and added, as the board response's end-of-substep check
-    /// does: a pair approaching faster than the threshold collides there (equation on the
-    /// approach speed, no time left to move), every one is then a contact.
+    /// of the substep are found on the end positions: pairs that were not among the rows
+    /// (the broad phase saw the free paths), and rows whose marbles were hit again after
+    /// the row's time (they can meet again). Each is traced back along the marbles' new
+    /// straight paths to where they met ([`late_row`]); a pair approaching faster than the
+    /// threshold collides there, and every one is then a contact.
     /// Returns whether any marble collided.
     fn late_overlaps(&mut self, p: &PairParams) -> bool {
         self.known.clear();
@@ -1186,6 +1202,9 @@ impl PairSolver {
         // the substep (a marble knocked onto the floor rebounds into the one that knocked
         // it): such a pair found approaching and overlapping at the end is traced back to
         // its new meeting.
+        // A shallow impact left to the next substep (its limit infinite) is taken up only
+        // if the later hits drove it deep.
+        let first_again = self.late.len();
         for row in &self.rows {
             let (i, j) = (row.i as usize, row.j as usize);
             if !(self.changed[i] || self.changed[j]) || self.event[i].max(self.event[j]) <= row.t {
@@ -1193,12 +1212,26 @@ impl PairSolver {
             }
             let (a, b) = (&self.bodies[i], &self.bodies[j]);
             let d = b.x - a.x;
-            if (b.v - a.v).dot(d) < 0.0
+            let deferred = row.limit == f32::INFINITY
+                && a.r + b.r - d.length() < DISCRETE_OVERLAP * a.r.min(b.r);
+            if !deferred
+                && (b.v - a.v).dot(d) < -p.threshold * d.length()
                 && let Some(again) = late_row(&self.bodies, &self.event, row.i, row.j, p)
             {
                 self.late.push(again);
             }
         }
+        // A pair with several rows is traced once.
+        self.late[first_again..].sort_unstable_by_key(|r| (r.i, r.j));
+        let mut kept = first_again;
+        for k in first_again..self.late.len() {
+            let pair = (self.late[k].i, self.late[k].j);
+            if kept == first_again || pair != (self.late[kept - 1].i, self.late[kept - 1].j) {
+                self.late[kept] = self.late[k];
+                kept += 1;
+            }
+        }
+        self.late.truncate(kept);
         let mut any = false;
         for row in self.late.iter_mut() {
             let (i, j) = (row.i as usize, row.j as usize);
@@ -1223,15 +1256,18 @@ impl PairSolver {
         any
     }
 
-    /// Marbles the cascade moved off their paths, checked against the boards at their end
-    /// positions. A collision can send a marble in flight into a board it did not touch
-    /// during the substep (the cascade only knows the boards each marble touched). A
-    /// marble found inside a board by `δ` crossed its surface on its straight path since
-    /// its last impact: faster than the threshold it rebounds there (equation (1) with the
-    /// pair's restitution) and ends `e δ` outside, as it would have; slower, it stops
-    /// approaching and is put on the surface.
+    /// Marbles the cascade moved off their paths, checked against the boards along them. A
+    /// collision can send a marble in flight into a board it did not touch during the
+    /// substep (the cascade only knows the boards each marble touched). Since its last
+    /// event the marble has moved on a straight line; that path, from where the marble was
+    /// then, is searched for its earliest impact with a board it did not touch there
+    /// ([`crate::narrow::earliest_impact`]: exact for planes, meshes, thin boxes and moving
+    /// boards alike). There, faster than the threshold it rebounds (equation (1) with the
+    /// pair's restitution), slower it stops approaching, and it moves on for the rest of the
+    /// substep (a few impacts at most). Boards it already touched at its last event that
+    /// it now presses into put it back on their surface and stop its approach.
     fn onto_boards(&mut self, p: &PairParams, boards: &[BoardSnapshot]) {
-        let mut touches = TouchList::default();
+        let (mut touching, mut touches) = (TouchList::default(), TouchList::default());
         for (k, b) in self.bodies.iter_mut().enumerate() {
             if !self.changed[k] {
                 continue;
@@ -1241,31 +1277,71 @@ impl PairSolver {
                 restitution: b.e,
                 ..Material::default()
             };
+            let mut t0 = self.event[k].min(p.h);
+            let mut start = b.x - b.v * (p.h - t0);
             crate::narrow::gather(
                 boards,
                 None,
-                p.h,
-                b.x,
+                t0,
+                start,
                 b.r,
                 tol,
                 &material,
                 -b.v,
-                &mut touches,
+                &mut touching,
             );
-            for t in touches.as_slice() {
-                let depth = -t.gap;
-                if depth <= 0.0 {
-                    continue;
-                }
+            for _ in 0..BOARD_IMPACTS {
+                let path = Path {
+                    t0,
+                    x: start,
+                    v: b.v,
+                    a: Vec3::ZERO,
+                };
+                let Some((tau, piece)) = crate::narrow::earliest_impact(
+                    boards,
+                    None,
+                    &path,
+                    p.h - t0,
+                    b.r,
+                    tol,
+                    &touching,
+                ) else {
+                    break;
+                };
+                let at = path.position(tau);
+                crate::narrow::gather(
+                    boards,
+                    None,
+                    t0 + tau,
+                    at,
+                    b.r,
+                    tol,
+                    &material,
+                    -b.v,
+                    &mut touches,
+                );
+                let Some(t) = touches.as_slice().iter().find(|t| t.piece == piece) else {
+                    break;
+                };
                 let u = (b.v - t.board_velocity).dot(t.normal);
                 if u < -p.threshold {
-                    let e = t.material.restitution;
-                    b.v -= (1.0 + e) * u * t.normal;
-                    b.x += ((1.0 + e) * depth) * t.normal;
-                    // It met the surface `δ / |u|` before the end of the substep.
-                    self.event[k] = (p.h + depth / u).max(self.event[k]);
-                } else {
-                    b.v -= u.min(0.0) * t.normal;
+                    b.v -= (1.0 + t.material.restitution) * u * t.normal;
+                } else if u < 0.0 {
+                    b.v -= u * t.normal;
+                }
+                t0 += tau;
+                start = at;
+                b.x = at + b.v * (p.h - t0);
+                self.event[k] = t0;
+                touching = touches;
+            }
+            // The boards it touched when it was last set moving: pressed into, it stays on
+            // them.
+            for t in touching.as_slice() {
+                let depth = b.r - (b.x - t.point).dot(t.normal);
+                let u = (b.v - t.board_velocity).dot(t.normal);
+                if depth > 0.0 && u < 0.0 {
+                    b.v -= u * t.normal;
                     b.x += depth * t.normal;
                 }
             }
@@ -1468,16 +1544,21 @@ impl PairSolver {
 
     /// Step 5 of the module docs: overlap beyond the slop out of positions.
     fn project(&mut self) {
-        let bodies = &mut self.bodies;
+        let (bodies, left) = (&mut self.bodies, &mut self.push_left);
+        // Each marble moves at most one radius in all (see [`MAX_PROJECTION`]).
+        left.clear();
+        left.extend(bodies.iter().map(|b| b.r));
         for _ in 0..PROJECTION_PASSES {
             let mut moved = false;
             for c in &self.constraints {
                 let i = c.i as usize;
                 if c.j == u32::MAX {
                     let gap = (bodies[i].x - c.p).dot(c.n) - bodies[i].r;
-                    if gap < -c.slop {
-                        let most = MAX_PROJECTION * bodies[i].r;
-                        bodies[i].x += (PROJECTION * (-c.slop - gap)).min(most) * c.n;
+                    if gap < -c.slop && left[i] > 0.0 {
+                        let most = (MAX_PROJECTION * bodies[i].r).min(left[i]);
+                        let push = (PROJECTION * (-c.slop - gap)).min(most);
+                        bodies[i].x += push * c.n;
+                        left[i] -= push;
                         self.changed[i] = true;
                         moved = true;
                     }
@@ -1492,9 +1573,15 @@ impl PairSolver {
                     let push = (PROJECTION * (-c.slop - gap))
                         .min(MAX_PROJECTION * bodies[i].r.min(bodies[j].r))
                         * c.k;
-                    let (wi, wj) = (bodies[i].w, bodies[j].w);
-                    bodies[i].x -= (push * wi) * n;
-                    bodies[j].x += (push * wj) * n;
+                    let pi = (push * bodies[i].w).min(left[i]);
+                    let pj = (push * bodies[j].w).min(left[j]);
+                    if pi <= 0.0 && pj <= 0.0 {
+                        continue;
+                    }
+                    bodies[i].x -= pi * n;
+                    bodies[j].x += pj * n;
+                    left[i] -= pi;
+                    left[j] -= pj;
                     self.changed[i] = true;
                     self.changed[j] = true;
                     moved = true;
@@ -1548,6 +1635,9 @@ impl Cascade<'_> {
         }
         self.event[i] = t;
         self.event[j] = t;
+        // The impact happened at `t` (later than found when a neighbour's impact passed it
+        // on): a later hit of either marble is what can make the pair meet again.
+        row.t = t;
         row.collided = true;
         self.changed[i] = true;
         self.changed[j] = true;

@@ -131,7 +131,7 @@ pub fn pour_box(n: usize) -> Scene {
         // A dense pile at 1/60 s needs substeps: in one 1/60 s step a marble falls a third
         // of its radius, and a crash of ten layers then leaves overlaps the solver cannot
         // take out; at 1/480 s with 15 (over-relaxed) solver passes the pile settles to
-        // under 1 mm/s with overlaps at the 0.2% slop, by 4.8 s in each of fourteen starts
+        // under 1 mm/s with overlaps at the 0.2% slop, by 5.0 s in each of fourteen starts
         // (measured with `examples/marble_pile.rs`; README, "Many marbles").
         substeps: 8,
         solver_iterations: 15,
