@@ -1277,19 +1277,14 @@ impl PairSolver {
                 restitution: b.e,
                 ..Material::default()
             };
+            let r = b.r;
+            // The boards within touching distance of centre `x` moving at `v`, at time `t`.
+            let gather = |t: f32, x: Vec3, v: Vec3, out: &mut TouchList| {
+                crate::narrow::gather(boards, None, t, x, r, tol, &material, -v, out);
+            };
             let mut t0 = self.event[k].min(p.h);
             let mut start = b.x - b.v * (p.h - t0);
-            crate::narrow::gather(
-                boards,
-                None,
-                t0,
-                start,
-                b.r,
-                tol,
-                &material,
-                -b.v,
-                &mut touching,
-            );
+            gather(t0, start, b.v, &mut touching);
             for _ in 0..BOARD_IMPACTS {
                 let path = Path {
                     t0,
@@ -1309,17 +1304,7 @@ impl PairSolver {
                     break;
                 };
                 let at = path.position(tau);
-                crate::narrow::gather(
-                    boards,
-                    None,
-                    t0 + tau,
-                    at,
-                    b.r,
-                    tol,
-                    &material,
-                    -b.v,
-                    &mut touches,
-                );
+                gather(t0 + tau, at, b.v, &mut touches);
                 let Some(t) = touches.as_slice().iter().find(|t| t.piece == piece) else {
                     break;
                 };
