@@ -412,7 +412,8 @@ impl NearPieces {
 
     /// Rebuilds the list around a marble of radius `r` at `x` (world, the substep's start):
     /// the board with the nearest piece within `tol + skin`, and its pieces within that
-    /// reach (the nearest [`NEAR_MAX`] of them, the reach shrunk to exclude the rest).
+    /// reach (the nearest [`NEAR_MAX`] of them, the reach shrunk to exclude the rest; only
+    /// the nearest, when the next is beyond half the reach).
     /// Leaves no list when there is no board.
     pub fn rebuild(&mut self, cache: &BoardCache, x: Vec3, r: f32, tol: f32, skin: f32) {
         *self = NearPieces {
@@ -464,6 +465,7 @@ impl NearPieces {
             }
             return;
         };
+        found.isolate_nearest();
         found.kept[..found.len].sort_unstable_by_key(|c| c.0);
         for (slot, c) in self.pieces.iter_mut().zip(&found.kept[..found.len]) {
             *slot = c.1;
@@ -492,6 +494,8 @@ struct Candidates {
     kept: [(u32, PieceId, f32); NEAR_MAX],
     len: usize,
     excluded: f32,
+    /// The reach asked for.
+    limit: f32,
 }
 
 impl Candidates {
@@ -500,6 +504,7 @@ impl Candidates {
             kept: [(0, PieceId::NONE, 0.0); NEAR_MAX],
             len: 0,
             excluded: limit,
+            limit,
         }
     }
 
@@ -525,6 +530,29 @@ impl Candidates {
             self.kept[far] = (order, piece, gap);
         } else {
             self.excluded = self.excluded.min(gap);
+        }
+    }
+
+    /// Keeps only the nearest piece, the reach shrunk to the next one's gap, when that
+    /// one is at least half the limit away: a marble on a floor a few radii from a wall
+    /// then holds a one-piece list (the closed form of [`NearPieces::lone_touch`] applies
+    /// to it) that lasts at least half as far as the full one.
+    fn isolate_nearest(&mut self) {
+        if self.len < 2 {
+            return;
+        }
+        let kept = &self.kept[..self.len];
+        let nearest = (0..kept.len())
+            .min_by(|&i, &j| kept[i].2.total_cmp(&kept[j].2))
+            .expect("two or more kept");
+        let next = (0..kept.len())
+            .filter(|&i| i != nearest)
+            .map(|i| kept[i].2)
+            .fold(f32::INFINITY, f32::min);
+        if next >= 0.5 * self.limit {
+            self.kept[0] = self.kept[nearest];
+            self.len = 1;
+            self.excluded = self.excluded.min(next);
         }
     }
 

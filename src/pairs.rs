@@ -135,8 +135,13 @@ const BOUND_MARGIN: f32 = 0.1;
 const DISCRETE_OVERLAP: f32 = 0.05;
 
 /// Up to this many marbles moved by collisions are looked up one by one after collisions
-/// (and checked against each other directly); more, and every marble is paired again.
+/// (and checked against each other directly); more, and they are paired with each other
+/// (and with the strays) through a grid of their own.
 const LATE_DIRECT: usize = 256;
+
+/// When more than one marble in this many was moved by collisions, every marble is paired
+/// again on the end positions instead (it costs about as much, and is simpler).
+const LATE_SHARE: usize = 4;
 
 /// Room added around each marble's bound sphere when the candidate pairs are found, as a
 /// fraction of its radius: the pairs stand until a marble moves this far from where it
@@ -714,9 +719,16 @@ pub struct PairSolver {
     /// Collision stage: velocity change and time of the last impact per body.
     dv: Vec<Vec3>,
     event: Vec<f32>,
-    known: Vec<(u32, u32)>,
+    /// The rows' pairs by their first body (`i < j`): the `j`s of body `i` are
+    /// `known[known_start[i]..known_start[i + 1]]` (a handful in a pile), so that asking
+    /// whether a pair is known is a short scan of one body's slice, not a search of all.
+    known_start: Vec<u32>,
+    known: Vec<u32>,
     /// Bodies a collision moved off their free paths.
     moved: Vec<u32>,
+    /// Those and the strays the collisions did not move, paired through a grid of their
+    /// own when there are many.
+    late_bodies: Vec<u32>,
     candidates: Vec<(u32, u32)>,
     /// The bodies' entities when the candidates were found.
     entities: Vec<Entity>,
@@ -999,7 +1011,9 @@ impl PairSolver {
         let touches = 2 * n;
         self.rows.reserve(pairs);
         self.known.reserve(pairs);
+        self.known_start.reserve(n + 2);
         self.moved.reserve(n);
+        self.late_bodies.reserve(n);
         self.candidates.reserve(2 * pairs);
         self.entities.reserve(n);
         self.late.reserve(n);
@@ -1133,33 +1147,70 @@ impl PairSolver {
     /// threshold collides there, and every one is then a contact.
     /// Returns whether any marble collided.
     fn late_overlaps(&mut self, p: &PairParams) -> bool {
+        // The rows' pairs by first body, a counting sort.
+        let n = self.bodies.len();
+        self.known_start.clear();
+        self.known_start.resize(n + 2, 0);
+        for row in &self.rows {
+            self.known_start[row.i.min(row.j) as usize + 2] += 1;
+        }
+        for k in 2..n + 2 {
+            self.known_start[k] += self.known_start[k - 1];
+        }
         self.known.clear();
-        self.known.extend(self.rows.iter().map(|r| (r.i, r.j)));
-        self.known.sort_unstable();
+        self.known.resize(self.rows.len(), 0);
+        for row in &self.rows {
+            let slot = &mut self.known_start[row.i.min(row.j) as usize + 1];
+            self.known[*slot as usize] = row.i.max(row.j);
+            *slot += 1;
+        }
         self.late.clear();
         self.moved.clear();
         self.moved
             .extend((0..self.bodies.len() as u32).filter(|&i| self.changed[i as usize]));
         // The grid still bounds every marble's path over the substep, and a marble the
         // cascade did not touch ends inside its bound: the moved marbles are looked up
-        // against it, and against each other directly. When too many moved for that,
-        // every marble is paired again on the end positions.
+        // against it, and against each other and the strays (outside their bounds)
+        // directly when few, else through a grid of their own on the end positions (the
+        // cost stays linear in the marbles moved). When a large share moved, every marble
+        // is paired again on the end positions.
+        let n = self.bodies.len();
         let few = self.moved.len() <= LATE_DIRECT;
+        let all = !few && self.moved.len() * LATE_SHARE > n;
+        let end_sphere = |b: &Body| {
+            b.x.extend(b.r + crate::narrow::touch_tolerance(p.tolerance, b.r, b.x))
+        };
+        self.late_bodies.clear();
+        if all {
+            self.late_bodies.extend(0..n as u32);
+        } else if !few {
+            self.late_bodies.extend_from_slice(&self.moved);
+            self.late_bodies.extend(
+                self.strays
+                    .iter()
+                    .copied()
+                    .filter(|&j| !self.changed[j as usize]),
+            );
+        }
         if !few {
             self.scratch_bound.clear();
-            self.scratch_bound.extend(self.bodies.iter().map(|b| {
-                b.x.extend(b.r + crate::narrow::touch_tolerance(p.tolerance, b.r, b.x))
-            }));
+            self.scratch_bound.extend(
+                self.late_bodies
+                    .iter()
+                    .map(|&i| end_sphere(&self.bodies[i as usize])),
+            );
             self.scratch_grid.build(&self.scratch_bound);
         }
         {
-            let (bodies, known, late, event, changed, stray) = (
+            let (bodies, known_start, known, late, event, changed, stray, late_bodies) = (
                 &self.bodies,
+                &self.known_start,
                 &self.known,
                 &mut self.late,
                 &self.event,
                 &self.changed,
                 &self.stray,
+                &self.late_bodies,
             );
             let mut check = |i: u32, j: u32| {
                 let (i, j) = (i.min(j), i.max(j));
@@ -1168,12 +1219,14 @@ impl PairSolver {
                 }
                 // Most candidates do not overlap: the distance test comes first.
                 if let Some(row) = late_row(bodies, event, i, j, p)
-                    && known.binary_search(&(i, j)).is_err()
+                    && !known
+                        [known_start[i as usize] as usize..known_start[i as usize + 1] as usize]
+                        .contains(&j)
                 {
                     late.push(row);
                 }
             };
-            if few {
+            if !all {
                 for (m, &i) in self.moved.iter().enumerate() {
                     let b = &bodies[i as usize];
                     let tol = crate::narrow::touch_tolerance(p.tolerance, b.r, b.x);
@@ -1185,17 +1238,28 @@ impl PairSolver {
                             check(i, j);
                         }
                     });
-                    for &j in &self.moved[m + 1..] {
-                        check(i, j);
-                    }
-                    for &j in &self.strays {
-                        if !changed[j as usize] {
+                    if few {
+                        for &j in &self.moved[m + 1..] {
                             check(i, j);
+                        }
+                        for &j in &self.strays {
+                            if !changed[j as usize] {
+                                check(i, j);
+                            }
                         }
                     }
                 }
-            } else {
+            }
+            if all {
                 self.scratch_grid.pairs(&self.scratch_bound, &mut check);
+            } else if !few {
+                // Moved marbles with each other and with the strays they did not move.
+                self.scratch_grid.pairs(&self.scratch_bound, |a, b| {
+                    let (i, j) = (late_bodies[a as usize], late_bodies[b as usize]);
+                    if changed[i as usize] || changed[j as usize] {
+                        check(i, j);
+                    }
+                });
             }
         }
         // A pair already among the rows can meet (again) when one of them is hit later in
