@@ -228,7 +228,7 @@ pub struct MarbleContact {
 /// empty unless `marble_collisions` is on).
 #[derive(Resource, Default, Debug)]
 pub struct MarbleContacts {
-    list: Vec<MarbleContact>,
+    pub(crate) list: Vec<MarbleContact>,
 }
 
 impl MarbleContacts {
@@ -705,6 +705,9 @@ pub struct PairSolver {
     skin_valid: bool,
     /// This substep's spheres (scratch of [`PairSolver::cover`]).
     spheres: Vec<Vec4>,
+    /// With the spheres: each body's radius and entity.
+    radii: Vec<f32>,
+    gathered: Vec<Entity>,
     /// Per body: outside its bound at the last cover, and the list of those.
     stray: Vec<bool>,
     strays: Vec<u32>,
@@ -755,24 +758,69 @@ pub struct PairSolver {
 }
 
 impl PairSolver {
-    /// The contact stage, before integration (module docs, steps 1–2), on
-    /// [`PairSolver::bodies`] at the substep's start (`x`, `v`, `a`, `d` set; `x0 = x`,
-    /// `v0 = v`): finds the touching pairs, keeps the candidate pairs for
-    /// [`PairSolver::find_impacts`], and returns whether any pair touches; then
-    /// [`PairSolver::solve_touching`] needs the board contacts.
-    pub fn find_touching(&mut self, p: &PairParams, out: &mut MarbleContacts) -> bool {
-        out.list.clear();
-        let n = self.bodies.len();
+    /// Each stage starts with the broad phase on one sphere per marble, gathered before
+    /// the bodies are: [`PairSolver::begin`], then [`PairSolver::push_sphere`] for every
+    /// marble in the order its body will have, then [`PairSolver::cover_gathered`]. A
+    /// substep in which no two marbles can meet (marbles spread over a board) ends there,
+    /// without building the bodies. `n` is the number of marbles; `out` (the stage's
+    /// records) is only sized.
+    pub fn begin(&mut self, n: usize, out: &mut MarbleContacts) {
         if n > self.reserved_for {
             self.reserve(n, out);
         }
+        self.spheres.clear();
+        self.radii.clear();
+        self.gathered.clear();
+    }
+
+    /// A marble's broad-phase sphere (centre, radius), its radius and entity.
+    #[inline]
+    pub fn push_sphere(&mut self, entity: Entity, sphere: Vec4, r: f32) {
+        self.spheres.push(sphere);
+        self.radii.push(r);
+        self.gathered.push(entity);
+    }
+
+    /// The broad phase on the gathered spheres (module docs, step 1); whether any two
+    /// marbles can meet.
+    pub fn cover_gathered(&mut self) -> bool {
+        self.cover_spheres();
+        !(self.candidates.is_empty() && self.extra.is_empty())
+    }
+
+    /// Drops the contact impulses kept for warm starting (no marble touches another).
+    pub fn forget_contacts(&mut self) {
+        self.warm.clear();
+    }
+
+    /// The contact stage's sphere: around the marble's free path over the substep (its
+    /// displacement `d` from `x`, along the boards it rests on), with a margin for the
+    /// contact forces' change of path and the touching tolerance.
+    #[inline]
+    pub fn contact_sphere(p: &PairParams, x: Vec3, d: Vec3, r: f32) -> Vec4 {
+        let tol = crate::narrow::touch_tolerance(p.tolerance, r, x);
+        (x + 0.5 * d).extend(r * (1.0 + BOUND_MARGIN) + 0.5 * d.length() + tol)
+    }
+
+    /// The impact stage's sphere: around the straight path from `x0` to `x` and the
+    /// touching tolerance.
+    #[inline]
+    pub fn impact_sphere(p: &PairParams, x0: Vec3, x: Vec3, r: f32) -> Vec4 {
+        let tol = crate::narrow::touch_tolerance(p.tolerance, r, x);
+        (0.5 * (x0 + x)).extend(r + 0.5 * (x - x0).length() + tol)
+    }
+
+    /// The contact stage, before integration (module docs, steps 1–2), after the broad
+    /// phase on [`PairSolver::contact_sphere`]s, on [`PairSolver::bodies`] at the
+    /// substep's start (`x`, `v`, `a`, `d` set; `x0 = x`, `v0 = v`): finds the touching
+    /// pairs, keeps the candidate pairs for [`PairSolver::find_impacts`], and returns
+    /// whether any pair touches; then [`PairSolver::solve_touching`] needs the board
+    /// contacts.
+    pub fn find_touching(&mut self, p: &PairParams) -> bool {
+        let n = self.bodies.len();
+        debug_assert_eq!(n, self.spheres.len(), "the broad phase ran on these bodies");
         self.changed.clear();
         self.changed.resize(n, false);
-        // 1. Broad phase over the free paths.
-        self.cover(|b| {
-            let tol = crate::narrow::touch_tolerance(p.tolerance, b.r, b.x);
-            (b.x + 0.5 * b.d).extend(b.r * (1.0 + BOUND_MARGIN) + 0.5 * b.d.length() + tol)
-        });
         // 2. The touching pairs, and the pairs that could close their gap this substep.
         self.rows.clear();
         for (i, j) in candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays) {
@@ -819,14 +867,9 @@ impl PairSolver {
     /// contacts.
     pub fn find_impacts(&mut self, p: &PairParams) -> bool {
         let n = self.bodies.len();
+        debug_assert_eq!(n, self.spheres.len(), "the broad phase ran on these bodies");
         self.changed.clear();
         self.changed.resize(n, false);
-        // The pairs whose swept paths can meet (a marble the boards sent elsewhere than
-        // its free path is paired afresh).
-        self.cover(|b| {
-            let tol = crate::narrow::touch_tolerance(p.tolerance, b.r, b.x);
-            (0.5 * (b.x0 + b.x)).extend(b.r + 0.5 * (b.x - b.x0).length() + tol)
-        });
         self.rows.clear();
         let mut any = false;
         for (i, j) in candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays) {
@@ -916,23 +959,28 @@ impl PairSolver {
     /// bound (strays) are paired afresh: with the others through the grid of bounds, with
     /// each other through a grid of their own. When the bodies changed, or more than one
     /// in [`STRAY_SHARE`] strayed, the candidates are found afresh.
+    #[cfg(test)]
     fn cover(&mut self, sphere: impl Fn(&Body) -> Vec4) {
-        let n = self.bodies.len();
         self.spheres.clear();
-        self.spheres.extend(self.bodies.iter().map(sphere));
+        self.radii.clear();
+        self.gathered.clear();
+        for b in &self.bodies {
+            self.spheres.push(sphere(b));
+            self.radii.push(b.r);
+            self.gathered.push(b.entity);
+        }
+        self.cover_spheres();
+    }
+
+    /// [`PairSolver::cover`] on the gathered spheres.
+    fn cover_spheres(&mut self) {
+        let n = self.spheres.len();
         self.extra.clear();
         self.strays.clear();
         self.stray.clear();
         self.stray.resize(n, false);
-        let same = self.skin_valid
-            && n > 0
-            && self.bound.len() == n
-            && self.entities.len() == n
-            && self
-                .bodies
-                .iter()
-                .zip(&self.entities)
-                .all(|(b, e)| b.entity == *e);
+        let same =
+            self.skin_valid && n > 0 && self.bound.len() == n && self.entities == self.gathered;
         if same {
             let sum = self
                 .spheres
@@ -960,15 +1008,15 @@ impl PairSolver {
         self.bound.extend(
             self.spheres
                 .iter()
-                .zip(&self.bodies)
-                .map(|(s, b)| s.truncate().extend(s.w + SKIN * b.r)),
+                .zip(&self.radii)
+                .map(|(s, r)| s.truncate().extend(s.w + SKIN * r)),
         );
         self.grid.build(&self.bound);
         self.candidates.clear();
         let (candidates, grid, bound) = (&mut self.candidates, &self.grid, &self.bound);
         grid.pairs(bound, |i, j| candidates.push((i.min(j), i.max(j))));
         self.entities.clear();
-        self.entities.extend(self.bodies.iter().map(|b| b.entity));
+        self.entities.extend_from_slice(&self.gathered);
         self.drift = Vec3::ZERO;
         self.skin_valid = true;
     }
@@ -1012,6 +1060,8 @@ impl PairSolver {
         self.rows.reserve(pairs);
         self.known.reserve(pairs);
         self.known_start.reserve(n + 2);
+        self.bodies.reserve(n);
+        self.changed.reserve(n);
         self.moved.reserve(n);
         self.late_bodies.reserve(n);
         self.candidates.reserve(2 * pairs);
@@ -1038,6 +1088,8 @@ impl PairSolver {
         self.bound.reserve(n);
         self.spheres.reserve(n);
         self.stray.reserve(n);
+        self.radii.reserve(n);
+        self.gathered.reserve(n);
         self.strays.reserve(n);
         self.extra.reserve(pairs);
         self.scratch_bound.reserve(n);

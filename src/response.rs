@@ -416,25 +416,69 @@ pub fn resolve_resting(
     contacts: &mut Contacts,
 ) -> Option<MarbleOut> {
     debug_assert!(m.w0.is_none() && tc.convex);
+    // `respond`, `settle` and `advance` on one touch, written out: the same operations in
+    // the same order (so the same bits, NaN included), without their lists.
     let sep = separation_speed(p.threshold);
-    let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
-    let mut s = State {
-        d: Vec3::ZERO,
-        v: m.v0,
-        w: Vec3::ZERO,
-        r: m.r,
-    };
-    let touch = std::slice::from_ref(tc);
+    let (n, vb) = (tc.normal, tc.board_velocity);
+    let mut v = m.v0;
+    let mut d = Vec3::ZERO;
     contacts.clear();
-    respond::<false>(touch, &mut s, p.threshold, boards, 0.0, contacts);
-    let motion = settle::<false>(touch, &mut s, m.a, sep, true);
-    s.v += offset(motion.a);
-    advance::<false>(&mut s, &motion, p.h);
+    // Step 2: equation (1) for a collision, the approach removed for a contact.
+    let u = (v - vb).dot(n);
+    let kind = if u < -p.threshold {
+        ContactKind::Collision
+    } else {
+        ContactKind::Contact
+    };
+    record(contacts, boards, tc, kind, u, 0.0);
+    if u < 0.0 {
+        let target = if kind == ContactKind::Collision {
+            -tc.material.restitution * u
+        } else {
+            0.0
+        };
+        for _ in 0..4 {
+            let u = (v - vb).dot(n);
+            if u < target {
+                v += (target - u) * n;
+            } else {
+                break;
+            }
+        }
+    }
+    // Step 3: on the surface, no normal speed, no acceleration into it.
+    let u = (v - vb).dot(n);
+    if u <= sep {
+        if tc.gap.abs() > 0.0 {
+            d -= tc.gap * n;
+        }
+        v -= u * n;
+    }
+    let mut a = m.a;
+    for _ in 0..4 {
+        let rel = v - vb;
+        let an = if rel.dot(n) <= sep {
+            let need = tc.surface_accel - 2.0 * rel.dot(tc.board_spin.cross(n));
+            a.dot(n) - need
+        } else {
+            0.0
+        };
+        if an < 0.0 {
+            a -= an * n;
+        } else {
+            break;
+        }
+    }
+    // The exact path to the substep's end.
+    let offset = p.integrator.velocity_offset(a, p.h);
+    v += offset;
+    d += v * p.h + a * (0.5 * p.h * p.h);
+    v += a * p.h;
     // The event loop's test for skipping its end-of-substep check.
-    let stays = (s.v - tc.board_velocity).dot(tc.normal) <= sep && motion.a.dot(tc.normal) >= 0.0;
+    let stays = (v - vb).dot(n) <= sep && a.dot(n) >= 0.0;
     stays.then(|| MarbleOut {
-        d: s.d,
-        v: s.v - offset(motion.a),
+        d,
+        v: v - offset,
         w: Vec3::ZERO,
     })
 }

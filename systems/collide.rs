@@ -52,6 +52,18 @@ fn board_touches(
     }
 }
 
+/// The displacement over the substep of a marble's free path along the boards it rests or
+/// slides on, as the marble–board response will move it (what the broad phase bounds).
+#[inline]
+fn free_path(config: &StepConfig, h: f32, v: Vec3, a: Vec3, contacts: &Contacts) -> Vec3 {
+    let (mut v, mut a) = (v, a);
+    for c in contacts.iter() {
+        v -= v.dot(c.normal).min(0.0) * c.normal;
+        a -= a.dot(c.normal).min(0.0) * c.normal;
+    }
+    config.integrator.delta(v, a, h).0
+}
+
 /// Writes a body's position (by compensated summation of its move) and velocity back.
 fn write_back(
     compensated: bool,
@@ -93,6 +105,18 @@ pub fn marble_contacts(
     let h = cache.h;
     let params = params(&config, h);
     let solver = solver.as_mut();
+    // The broad phase first: marbles spread apart stop there.
+    recorded.list.clear();
+    solver.begin(marbles.iter().len(), &mut recorded);
+    for (entity, (position, _, velocity, acceleration), (radius, _, _, contacts), _) in &marbles {
+        let d = free_path(&config, h, velocity.0, acceleration.0, contacts);
+        let sphere = PairSolver::contact_sphere(&params, position.0, d, radius.0);
+        solver.push_sphere(entity, sphere, radius.0);
+    }
+    if !solver.cover_gathered() {
+        solver.forget_contacts();
+        return;
+    }
     solver.bodies.clear();
     for (
         entity,
@@ -101,13 +125,6 @@ pub fn marble_contacts(
         (spin, friction),
     ) in &marbles
     {
-        // The free path the broad phase bounds: along the boards the marble rests or
-        // slides on, as the marble–board response will move it.
-        let (mut v, mut a) = (velocity.0, acceleration.0);
-        for c in contacts.iter() {
-            v -= v.dot(c.normal).min(0.0) * c.normal;
-            a -= a.dot(c.normal).min(0.0) * c.normal;
-        }
         solver.bodies.push(Body {
             entity,
             x: position.0,
@@ -118,13 +135,13 @@ pub fn marble_contacts(
             r: radius.0,
             e: restitution.0,
             a: acceleration.0,
-            d: config.integrator.delta(v, a, h).0,
+            d: free_path(&config, h, velocity.0, acceleration.0, contacts),
             omega: spin.as_ref().map_or(Vec3::ZERO, |w| w.0),
             spins: config.rolling && spin.is_some(),
             mu: friction.map_or(0.0, |f| f.0),
         });
     }
-    if !solver.find_touching(&params, &mut recorded) {
+    if !solver.find_touching(&params) {
         return;
     }
     solver.board_touches.clear();
@@ -178,6 +195,16 @@ pub fn collide_marbles(
     let h = cache.h;
     let params = params(&config, h);
     let solver = solver.as_mut();
+    // The broad phase first, on the paths the marbles took: marbles spread apart stop
+    // there.
+    solver.begin(marbles.iter().len(), &mut recorded);
+    for (entity, (position, _, _), (start, radius, _, _, _)) in &marbles {
+        let sphere = PairSolver::impact_sphere(&params, start.position, position.0, radius.0);
+        solver.push_sphere(entity, sphere, radius.0);
+    }
+    if !solver.cover_gathered() {
+        return;
+    }
     solver.bodies.clear();
     for (entity, (position, _, velocity), (start, radius, mass, restitution, _)) in &marbles {
         solver.bodies.push(Body {
