@@ -33,7 +33,10 @@
 //!    are kept while every marble's sphere stays inside its bound after taking off the
 //!    marbles' common drift (their mean displacement), so marbles sliding down a board
 //!    together never rebuild; the few that leave their bounds are paired afresh on their
-//!    own, and the grid is rebuilt only when many do.
+//!    own, and the grid is rebuilt only when many do. The spheres are gathered from the
+//!    marbles before anything else ([`PairSolver::begin`], [`PairSolver::push_sphere`],
+//!    [`PairSolver::cover_gathered`]): a substep in which no two marbles can meet (marbles
+//!    spread over a board) stops there, without building the solver's bodies.
 //! 2. **Narrow phase: exact sphere–sphere.** A pair touching at the start (within the
 //!    touching tolerance) is judged, like board contacts, on its closing speed *before
 //!    this step's forces*: faster than `restitution_threshold` is a collision, otherwise a
@@ -85,6 +88,11 @@
 //! broad phase did not pair with them, and against a marble they already met when one of
 //! the two was hit again later (the floor's rebound sends it back into the marble that
 //! knocked it): each such pair is traced back along the new straight paths to its meeting.
+//! The search costs what the moved marbles cost, not what the pile costs: they are looked
+//! up in the kept grid and paired with each other (and with the strays) through a grid of
+//! their own, and whether a pair is already a row is read from its first marble's short
+//! slice of rows (a counting sort). (A 100,000-marble pour moves thousands of marbles a
+//! substep: its first 20 steps went from 43 to 28 µs per marble-step with this.)
 //!
 //! Piles need short substeps: bench scene (b) uses 8 substeps of a 1/60 s step and 15
 //! (over-relaxed) solver passes; over fourteen starts of its 1,000-marble pour the last
