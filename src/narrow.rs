@@ -292,8 +292,10 @@ impl NearPieces {
     /// it is the only piece within reach of the marble's whole substep of length `h` on it:
     /// the list holds one piece, of a board that does not move, and covers every centre
     /// the marble can reach sliding on the piece (its speed, and the acceleration the piece
-    /// leaves it, over `h`), and no other board comes within reach. `None` when the list
-    /// cannot tell or the piece is farther than `tol`.
+    /// leaves it, over `h`), and no other board comes within reach. On a moving board (the
+    /// scene's only board) the list vouches only that this is the one touch at the start:
+    /// the event loop resolves it, its searches using the list where it covers. `None`
+    /// when the list cannot tell or the piece is farther than `tol`.
     #[expect(
         clippy::too_many_arguments,
         reason = "a hot kernel taking plain values"
@@ -315,58 +317,66 @@ impl NearPieces {
         };
         let bi = self.board as usize;
         let b = boards.get(bi)?;
-        if b.is_moving() {
+        let moving = b.is_moving();
+        if moving && boards.len() > 1 {
             return None;
         }
-        let touch = if self.face_normal != Vec3::ZERO && b.pose_version == self.pose_version {
-            // A flat face where it was: the distance is affine in the centre.
-            let d = x - self.anchor_world;
-            if d.length() + tol >= self.reach {
-                return None;
-            }
-            let n = self.face_normal;
-            let gap = self.face_gap + n.dot(d);
-            if gap.abs() > tol {
-                return None;
-            }
-            Touch {
-                piece: id,
-                point: x - (r + gap) * n,
-                normal: n,
-                gap,
-                board_velocity: Vec3::ZERO,
-                surface_accel: 0.0,
-                board_spin: Vec3::ZERO,
-                material: material.combine(b),
-                convex: true,
-            }
-        } else {
-            let inv = b.rotation.conjugate();
-            let local = inv * (x - b.position);
-            if !self.covers(local, 0.0, tol) {
-                return None;
-            }
-            // As `gather` computes it.
-            let piece = b.geometry.piece(id.part(), id.sub());
-            let p = b.geometry.proximity(id.part(), &piece, local, inv * -v);
-            let gap = p.distance - r;
-            if gap > tol {
-                return None;
-            }
-            let point = b.rotation * p.point + b.position;
-            let normal = b.rotation * p.normal;
-            Touch {
-                piece: id,
-                point,
-                normal,
-                gap,
-                board_velocity: b.point_velocity(0.0, point),
-                surface_accel: b.surface_accel(0.0, point, normal),
-                board_spin: b.angular_velocity,
-                material: material.combine(b),
-                convex: piece.is_convex(),
-            }
-        };
+        let touch =
+            if !moving && self.face_normal != Vec3::ZERO && b.pose_version == self.pose_version {
+                // A flat face where it was: the distance is affine in the centre.
+                let d = x - self.anchor_world;
+                if d.length() + tol >= self.reach {
+                    return None;
+                }
+                let n = self.face_normal;
+                let gap = self.face_gap + n.dot(d);
+                if gap.abs() > tol {
+                    return None;
+                }
+                Touch {
+                    piece: id,
+                    point: x - (r + gap) * n,
+                    normal: n,
+                    gap,
+                    board_velocity: Vec3::ZERO,
+                    surface_accel: 0.0,
+                    board_spin: Vec3::ZERO,
+                    material: material.combine(b),
+                    convex: true,
+                }
+            } else {
+                // As `gather` computes it (at the board's pose at the start, bit for bit).
+                let (c, q) = b.pose_at(0.0);
+                let inv = q.conjugate();
+                let local = inv * (x - c);
+                if !self.covers(local, 0.0, tol) {
+                    return None;
+                }
+                let piece = b.geometry.piece(id.part(), id.sub());
+                let p = b.geometry.proximity(id.part(), &piece, local, inv * -v);
+                let gap = p.distance - r;
+                if gap > tol {
+                    return None;
+                }
+                let point = q * p.point + c;
+                let normal = q * p.normal;
+                Touch {
+                    piece: id,
+                    point,
+                    normal,
+                    gap,
+                    board_velocity: b.point_velocity(0.0, point),
+                    surface_accel: b.surface_accel(0.0, point, normal),
+                    board_spin: b.angular_velocity,
+                    material: material.combine(b),
+                    convex: piece.is_convex(),
+                }
+            };
+        if moving {
+            // The one touch at the start (the list covers the centre, and there is no
+            // other board); the event loop does the rest.
+            return Some(touch);
+        }
         // Where the marble can go: at most its speed, and the acceleration the piece
         // leaves it (none into the piece; friction adds at most μ times the normal force
         // for a marble that spins), over the substep; the list and the other boards must

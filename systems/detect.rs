@@ -211,7 +211,8 @@ impl<'a> Stage<'a> {
         }
         // The commonest case, a marble resting, sliding or rolling on one piece with
         // nothing else near, is resolved here (the response stage skips it): in closed
-        // form, or, for a marble that spins, by the event loop on that one touch.
+        // form, or, for a marble that spins or a board that moves, by the event loop on
+        // that one touch.
         // (With or without continuous collision: nothing else is within reach.)
         if let Some(tc) = near.lone_touch(
             boards,
@@ -233,7 +234,9 @@ impl<'a> Stage<'a> {
                 r,
                 material,
             };
-            let out = if w0.is_some() {
+            // On a moving board the list vouches only for the touch at the start: the
+            // event loop resolves it, as for a marble that spins.
+            let out = if w0.is_some() || boards[tc.piece.board()].is_moving() {
                 touches.clear();
                 touches.insert(tc, tol);
                 Some(resolve(
