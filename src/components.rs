@@ -153,12 +153,12 @@ pub struct Mass {
 }
 
 impl Mass {
-    /// A mass of `mass` kg. Panics in debug builds unless `mass` is finite and > 0 (scene
-    /// loading validates it first and reports an error instead).
+    /// A mass of `mass` kg. Panics in debug builds unless `mass` is finite and > 0 with a
+    /// finite inverse (scene loading validates it first and reports an error instead).
     pub fn new(mass: f32) -> Self {
         debug_assert!(
-            mass.is_finite() && mass > 0.0,
-            "mass must be > 0, got {mass}"
+            mass.is_finite() && mass > 0.0 && (1.0 / mass).is_finite(),
+            "mass must be > 0 with a finite inverse, got {mass}"
         );
         Mass {
             mass,

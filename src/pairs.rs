@@ -153,6 +153,18 @@ const LATE_DIRECT: usize = 256;
 /// again on the end positions instead (it costs about as much, and is simpler).
 const LATE_SHARE: usize = 4;
 
+/// How [`PairSolver::late_overlaps`] looks for pairs the collisions brought together.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LateSearch {
+    /// The moved marbles against the kept grid, each other and the strays, one by one.
+    Direct,
+    /// The moved marbles against the kept grid, and through a grid of their own with each
+    /// other and the strays.
+    OwnGrid,
+    /// Every marble paired again on the end positions.
+    All,
+}
+
 /// Room added around each marble's bound sphere when the candidate pairs are found, as a
 /// fraction of its radius: the pairs stand until a marble moves this far from where it
 /// was relative to the marbles' common drift (module docs, step 1).
@@ -771,6 +783,12 @@ pub struct PairSolver {
     pub changed: Vec<bool>,
     /// Marble count the buffers were sized for.
     reserved_for: usize,
+    /// Test only: check every late-pair search against re-pairing every marble, and count
+    /// the checks by search.
+    #[cfg(test)]
+    cross_check_late: bool,
+    #[cfg(test)]
+    cross_checked: [usize; 3],
 }
 
 impl PairSolver {
@@ -1210,44 +1228,13 @@ impl PairSolver {
         true
     }
 
-    /// After collisions moved marbles off their free paths, pairs that overlap at the end
-    /// of the substep are found on the end positions: pairs that were not among the rows
-    /// (the broad phase saw the free paths), and rows whose marbles were hit again after
-    /// the row's time (they can meet again). Each is traced back along the marbles' new
-    /// straight paths to where they met ([`late_row`]); a pair approaching faster than the
-    /// threshold collides there, and every one is then a contact.
-    /// Returns whether any marble collided.
-    fn late_overlaps(&mut self, p: &PairParams) -> bool {
-        // The rows' pairs by first body, a counting sort.
-        let n = self.bodies.len();
-        self.known_start.clear();
-        self.known_start.resize(n + 2, 0);
-        for row in &self.rows {
-            self.known_start[row.i.min(row.j) as usize + 2] += 1;
-        }
-        for k in 2..n + 2 {
-            self.known_start[k] += self.known_start[k - 1];
-        }
-        self.known.clear();
-        self.known.resize(self.rows.len(), 0);
-        for row in &self.rows {
-            let slot = &mut self.known_start[row.i.min(row.j) as usize + 1];
-            self.known[*slot as usize] = row.i.max(row.j);
-            *slot += 1;
-        }
+    /// The search of [`PairSolver::late_overlaps`] for pairs that overlap at the end and
+    /// are not among the rows, into `late` (rows not yet collided), by `search`.
+    fn find_late(&mut self, p: &PairParams, search: LateSearch) {
         self.late.clear();
-        self.moved.clear();
-        self.moved
-            .extend((0..self.bodies.len() as u32).filter(|&i| self.changed[i as usize]));
-        // The grid still bounds every marble's path over the substep, and a marble the
-        // cascade did not touch ends inside its bound: the moved marbles are looked up
-        // against it, and against each other and the strays (outside their bounds)
-        // directly when few, else through a grid of their own on the end positions (the
-        // cost stays linear in the marbles moved). When a large share moved, every marble
-        // is paired again on the end positions.
         let n = self.bodies.len();
-        let few = self.moved.len() <= LATE_DIRECT;
-        let all = !few && self.moved.len() * LATE_SHARE > n;
+        let few = search == LateSearch::Direct;
+        let all = search == LateSearch::All;
         let end_sphere = |b: &Body| {
             b.x.extend(b.r + crate::narrow::touch_tolerance(p.tolerance, b.r, b.x))
         };
@@ -1332,6 +1319,75 @@ impl PairSolver {
                     }
                 });
             }
+        }
+    }
+
+    /// Test only: the late pairs `search` found involving a moved marble are exactly
+    /// those re-pairing every marble finds (which also sees pairs of unmoved marbles).
+    #[cfg(test)]
+    fn cross_check(&mut self, p: &PairParams, search: LateSearch) {
+        let pairs = |late: &[Row], changed: &[bool]| {
+            let mut v: Vec<(u32, u32)> = late
+                .iter()
+                .filter(|r| changed[r.i as usize] || changed[r.j as usize])
+                .map(|r| (r.i, r.j))
+                .collect();
+            v.sort_unstable();
+            v
+        };
+        let found = pairs(&self.late, &self.changed);
+        self.find_late(p, LateSearch::All);
+        let every = pairs(&self.late, &self.changed);
+        assert_eq!(found, every, "{search:?} missed or added late pairs");
+        self.cross_checked[search as usize] += 1;
+        self.find_late(p, search);
+    }
+
+    /// After collisions moved marbles off their free paths, pairs that overlap at the end
+    /// of the substep are found on the end positions: pairs that were not among the rows
+    /// (the broad phase saw the free paths), and rows whose marbles were hit again after
+    /// the row's time (they can meet again). Each is traced back along the marbles' new
+    /// straight paths to where they met ([`late_row`]); a pair approaching faster than the
+    /// threshold collides there, and every one is then a contact.
+    /// Returns whether any marble collided.
+    fn late_overlaps(&mut self, p: &PairParams) -> bool {
+        // The rows' pairs by first body, a counting sort.
+        let n = self.bodies.len();
+        self.known_start.clear();
+        self.known_start.resize(n + 2, 0);
+        for row in &self.rows {
+            self.known_start[row.i.min(row.j) as usize + 2] += 1;
+        }
+        for k in 2..n + 2 {
+            self.known_start[k] += self.known_start[k - 1];
+        }
+        self.known.clear();
+        self.known.resize(self.rows.len(), 0);
+        for row in &self.rows {
+            let slot = &mut self.known_start[row.i.min(row.j) as usize + 1];
+            self.known[*slot as usize] = row.i.max(row.j);
+            *slot += 1;
+        }
+        self.moved.clear();
+        self.moved
+            .extend((0..self.bodies.len() as u32).filter(|&i| self.changed[i as usize]));
+        // The grid still bounds every marble's path over the substep, and a marble the
+        // cascade did not touch ends inside its bound: the moved marbles are looked up
+        // against it, and against each other and the strays (outside their bounds)
+        // directly when few, else through a grid of their own on the end positions (the
+        // cost stays linear in the marbles moved). When a large share moved, every marble
+        // is paired again on the end positions.
+        let search = if self.moved.len() <= LATE_DIRECT {
+            LateSearch::Direct
+        } else if self.moved.len() * LATE_SHARE > n {
+            LateSearch::All
+        } else {
+            LateSearch::OwnGrid
+        };
+        self.find_late(p, search);
+        #[cfg(test)]
+        if self.cross_check_late && search != LateSearch::All {
+            self.cross_check(p, search);
         }
         // A pair already among the rows can meet (again) when one of them is hit later in
         // the substep (a marble knocked onto the floor rebounds into the one that knocked
@@ -2006,6 +2062,29 @@ mod tests {
 
     /// The grid reports exactly the pairs whose bound spheres overlap, each once, for
     /// mixed sizes (some large) and random positions.
+    /// The late-pair searches that look only at the marbles the collisions moved (one by
+    /// one, or through a grid of their own) find exactly the pairs that re-pairing every
+    /// marble finds, checked at every substep of a pour in which tens to hundreds of
+    /// marbles are moved per substep.
+    #[test]
+    fn late_pair_searches_match_re_pairing_every_marble() {
+        let scene = crate::scenes::pour_box(1200);
+        let mut sim = crate::simulation::Simulation::from_scene(&scene).unwrap();
+        sim.step();
+        sim.world_mut()
+            .resource_mut::<PairSolver>()
+            .cross_check_late = true;
+        for _ in 0..20 {
+            sim.step();
+        }
+        let checked = sim.world().resource::<PairSolver>().cross_checked;
+        eprintln!("late-pair searches checked (direct, own grid): {checked:?}");
+        assert!(
+            checked[LateSearch::Direct as usize] > 0 && checked[LateSearch::OwnGrid as usize] > 0,
+            "both searches ran: {checked:?}"
+        );
+    }
+
     #[test]
     fn grid_pairs_match_brute_force() {
         let mut dense = 0;
