@@ -400,27 +400,28 @@ impl Scene {
             }
         }
         for (i, m) in self.marbles.iter().enumerate() {
-            let f = |name: &str| format!("marbles[{i}].{name}");
-            finite3(&f("position"), m.position)?;
-            finite3(&f("velocity"), m.velocity)?;
-            finite3(&f("angular_velocity"), m.angular_velocity)?;
-            positive(&f("radius"), m.radius)?;
+            // A million marbles are checked without formatting a field name.
+            let f = |name: &'static str| Lazy(move || format!("marbles[{i}].{name}"));
+            finite3(f("position"), m.position)?;
+            finite3(f("velocity"), m.velocity)?;
+            finite3(f("angular_velocity"), m.angular_velocity)?;
+            positive(f("radius"), m.radius)?;
             if let Some(mass) = m.mass {
-                positive(&f("mass"), mass)?;
+                positive(f("mass"), mass)?;
                 if !(1.0 / mass).is_finite() {
-                    return invalid(&f("mass"), "large enough to have a finite inverse", mass);
+                    return invalid(f("mass"), "large enough to have a finite inverse", mass);
                 }
             } else if !crate::components::Mass::glass_mass(m.radius).is_normal() {
                 return invalid(
-                    &f("radius"),
+                    f("radius"),
                     "small and large enough for a finite, non-zero glass mass (or give mass)",
                     m.radius,
                 );
             }
-            unit_interval(&f("restitution"), m.restitution)?;
-            non_negative(&f("friction"), m.friction)?;
-            non_negative(&f("rolling_resistance"), m.rolling_resistance)?;
-            non_negative(&f("spin_damping"), m.spin_damping)?;
+            unit_interval(f("restitution"), m.restitution)?;
+            non_negative(f("friction"), m.friction)?;
+            non_negative(f("rolling_resistance"), m.rolling_resistance)?;
+            non_negative(f("spin_damping"), m.spin_damping)?;
         }
         Ok(())
     }
@@ -636,15 +637,45 @@ fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Result<(), Scene
     }
 }
 
-fn invalid<T>(field: &str, rule: &str, value: impl std::fmt::Display) -> Result<T, SceneError> {
+/// A field's name in an error message, built only when there is an error.
+trait FieldName {
+    fn name(&self) -> String;
+}
+
+impl FieldName for &str {
+    fn name(&self) -> String {
+        (*self).to_string()
+    }
+}
+
+impl FieldName for &String {
+    fn name(&self) -> String {
+        (*self).clone()
+    }
+}
+
+/// A field name formatted on demand.
+struct Lazy<F>(F);
+
+impl<F: Fn() -> String> FieldName for Lazy<F> {
+    fn name(&self) -> String {
+        (self.0)()
+    }
+}
+
+fn invalid<T>(
+    field: impl FieldName,
+    rule: &str,
+    value: impl std::fmt::Display,
+) -> Result<T, SceneError> {
     Err(SceneError::Invalid {
-        field: field.to_string(),
+        field: field.name(),
         rule: rule.to_string(),
         value: value.to_string(),
     })
 }
 
-fn finite(field: &str, x: f32) -> Result<(), SceneError> {
+fn finite(field: impl FieldName, x: f32) -> Result<(), SceneError> {
     if x.is_finite() {
         Ok(())
     } else {
@@ -652,7 +683,7 @@ fn finite(field: &str, x: f32) -> Result<(), SceneError> {
     }
 }
 
-fn finite3(field: &str, v: [f32; 3]) -> Result<(), SceneError> {
+fn finite3(field: impl FieldName, v: [f32; 3]) -> Result<(), SceneError> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
@@ -660,7 +691,7 @@ fn finite3(field: &str, v: [f32; 3]) -> Result<(), SceneError> {
     }
 }
 
-fn positive(field: &str, x: f32) -> Result<(), SceneError> {
+fn positive(field: impl FieldName, x: f32) -> Result<(), SceneError> {
     if x.is_finite() && x > 0.0 {
         Ok(())
     } else {
@@ -668,7 +699,7 @@ fn positive(field: &str, x: f32) -> Result<(), SceneError> {
     }
 }
 
-fn non_negative(field: &str, x: f32) -> Result<(), SceneError> {
+fn non_negative(field: impl FieldName, x: f32) -> Result<(), SceneError> {
     if x.is_finite() && x >= 0.0 {
         Ok(())
     } else {
@@ -676,7 +707,7 @@ fn non_negative(field: &str, x: f32) -> Result<(), SceneError> {
     }
 }
 
-fn unit_interval(field: &str, x: f32) -> Result<(), SceneError> {
+fn unit_interval(field: impl FieldName, x: f32) -> Result<(), SceneError> {
     if (0.0..=1.0).contains(&x) {
         Ok(())
     } else {
