@@ -1,5 +1,6 @@
 //! Steps a bench scene for profiling: `cargo run --release --example profile_scene --
-//! SCENE N STEPS [collisions]`, e.g. `walled_board 10000 60 collisions`.
+//! SCENE N STEPS [collisions|off|rolling|noboards]`, e.g. `walled_board 10000 60 collisions`
+//! (`rolling`: spin and friction on, marble collisions off).
 use bevy_marble::prelude::*;
 use bevy_marble::scenes::BenchScene;
 
@@ -11,6 +12,7 @@ fn main() {
     let mut scene = kind.build(n);
     if let Some(c) = args.get(4) {
         scene.marble_collisions = c == "collisions";
+        scene.rolling |= c == "rolling";
         if c == "noboards" {
             scene.boards.clear();
         }

@@ -1337,6 +1337,113 @@ mod tests {
         assert!(applied > 400, "applied {applied} times");
     }
 
+    /// The closed form for a spinning marble on one piece
+    /// ([`crate::response::resolve_rolling`]) gives the event loop's result, bit for bit
+    /// (position, velocity, spin and records), whenever it applies: rolling, slipping,
+    /// with and without rolling resistance and spin damping, for every integrator; and it
+    /// declines when a friction event falls inside the substep.
+    #[test]
+    fn rolling_closed_form_is_the_event_loop() {
+        use crate::components::Contacts;
+        use crate::config::Integrator;
+        use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_rolling};
+        let cache = boards(Vec3::ZERO);
+        let b = &cache.boards[1];
+        let mut rng = Lcg(7);
+        let (mut applied, mut declined) = (0, 0);
+        for k in 0..4000 {
+            let integrator = [
+                Integrator::SemiImplicitEuler,
+                Integrator::VelocityVerlet,
+                Integrator::Rk4,
+                Integrator::ExplicitEuler,
+            ][k % 4];
+            let p = SubstepParams {
+                h: cache.h,
+                integrator,
+                ccd: true,
+                threshold: 0.05,
+                tolerance: 1e-4,
+                max_impacts: 8,
+            };
+            let x0 = near_the_box(&cache, &mut rng);
+            let tol = touch_tolerance(p.tolerance, R, x0);
+            let speed = if k % 3 == 0 { 0.02 } else { 0.5 };
+            let v0 = rng.vec(Vec3::splat(speed));
+            let up = b.rotation * Vec3::Y;
+            // Rolling on the floor (no slip), or spinning at random.
+            let w0 = if k % 2 == 0 {
+                up.cross(v0) / R
+            } else {
+                rng.vec(Vec3::splat(200.0))
+            };
+            let m = MarbleIn {
+                x0,
+                v0,
+                w0: Some(w0),
+                a: b.rotation * Vec3::new(0.0, -9.81, 0.0) + rng.vec(Vec3::splat(2.0)),
+                r: R,
+                material: Material {
+                    restitution: 0.7,
+                    friction: 0.5,
+                    rolling_resistance: if k % 5 < 2 { 0.02 } else { 0.0 },
+                    spin_damping: if k % 7 < 3 { 0.05 } else { 0.0 },
+                },
+            };
+            let mut list = NearPieces::default();
+            list.rebuild(&cache, x0, R, tol, 4.0 * R);
+            let Some(tc) =
+                list.lone_touch(&cache.boards, x0, m.v0, m.a, p.h, R, tol, &m.material, true)
+            else {
+                continue;
+            };
+            let mut fast = Contacts::default();
+            let Some(closed) = resolve_rolling(&cache.boards, &p, &m, &tc, &mut fast) else {
+                declined += 1;
+                continue;
+            };
+            let mut touches = TouchList::default();
+            gather(
+                &cache.boards,
+                None,
+                0.0,
+                x0,
+                R,
+                tol,
+                &m.material,
+                -m.v0,
+                &mut touches,
+            );
+            let mut full = Contacts::default();
+            let looped = resolve(
+                &cache.boards,
+                None,
+                &p,
+                &m,
+                Found::Touching,
+                &mut touches,
+                &mut full,
+            );
+            let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+            assert_eq!(
+                (bits(closed.d), bits(closed.v), bits(closed.w)),
+                (bits(looped.d), bits(looped.v), bits(looped.w)),
+                "case {k}"
+            );
+            let record = |c: &Contacts| {
+                c.iter()
+                    .map(|c| (c.piece, c.kind, c.closing_speed.to_bits(), bits(c.normal)))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(record(&fast), record(&full), "case {k}");
+            applied += 1;
+        }
+        assert!(
+            applied > 400 && declined > 20,
+            "applied {applied} times, declined {declined}"
+        );
+    }
+
     /// The earliest impact along a path the list covers is the search's, on a still and on
     /// a turning board.
     #[test]

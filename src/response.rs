@@ -62,11 +62,12 @@
 //! The forces are constant over each stretch between events, so the exact-parabola path
 //! and the spin `ω + α τ` stay exact there.
 //!
-//! The commonest case — a marble that does not spin, on one convex piece of a still board,
-//! not leaving it, with nothing else within reach of its substep — has this loop's result
-//! in closed form ([`resolve_resting`]): the response, the constrained acceleration and
-//! the exact path to the substep's end, with no search (see [`crate::narrow`], "Near
-//! pieces"). A unit test checks it gives the loop's bits.
+//! The commonest case — a marble on one convex piece of a still board, not leaving it,
+//! with nothing else within reach of its substep — has this loop's result in closed form
+//! ([`resolve_resting`]; [`resolve_rolling`] for a marble that spins, when no friction
+//! event falls inside the substep): the response, the constrained (and frictional)
+//! accelerations and the exact path to the substep's end, with no search (see
+//! [`crate::narrow`], "Near pieces"). Unit tests check that both give the loop's bits.
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever finishes the substep as without continuous collision: its
@@ -480,6 +481,53 @@ pub fn resolve_resting(
         d,
         v: v - offset,
         w: Vec3::ZERO,
+    })
+}
+
+/// [`resolve_resting`] for a marble that spins (rolling on): rolling, or slipping on its
+/// one touch with friction, rolling resistance and spin damping. The same operations as
+/// the event loop (with continuous collision) when no friction event falls inside the
+/// substep (a slip that stops, a spin that rolling resistance or damping stops): the
+/// response, the constrained and frictional accelerations, the exact path to the
+/// substep's end. `None` (and `contacts` to be rewritten) when an event falls inside the
+/// substep, the marble leaves the piece, or continuous collision is off: the event loop
+/// handles those.
+pub fn resolve_rolling(
+    boards: &[BoardSnapshot],
+    p: &SubstepParams,
+    m: &MarbleIn,
+    tc: &Touch,
+    contacts: &mut Contacts,
+) -> Option<MarbleOut> {
+    let w0 = m.w0?;
+    debug_assert!(tc.convex);
+    if !p.ccd {
+        return None;
+    }
+    let sep = separation_speed(p.threshold);
+    let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
+    let mut s = State {
+        d: Vec3::ZERO,
+        v: m.v0,
+        w: w0,
+        r: m.r,
+    };
+    let touch = std::slice::from_ref(tc);
+    contacts.clear();
+    respond::<true>(touch, &mut s, p.threshold, boards, 0.0, contacts);
+    let motion = settle::<true>(touch, &mut s, m.a, sep, true);
+    if motion.slip_stops.is_some_and(|ts| ts < p.h) {
+        return None;
+    }
+    s.v += offset(motion.a);
+    s.w += offset(motion.alpha);
+    advance::<true>(&mut s, &motion, p.h);
+    // The event loop's test for skipping its end-of-substep check.
+    let stays = (s.v - tc.board_velocity).dot(tc.normal) <= sep && motion.a.dot(tc.normal) >= 0.0;
+    stays.then(|| MarbleOut {
+        d: s.d,
+        v: s.v - offset(motion.a),
+        w: s.w - offset(motion.alpha),
     })
 }
 

@@ -11,7 +11,7 @@ use crate::config::StepConfig;
 use crate::narrow::{
     BoardCache, Material, NearPieces, Path, TouchList, earliest_impact, gather, touch_tolerance,
 };
-use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting};
+use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting, resolve_rolling};
 
 /// A rebuilt [`NearPieces`] list reaches this many substeps of the marble's motion beyond
 /// it (within two and eight radii; a marble moving more than four radii a substep gets
@@ -234,22 +234,34 @@ impl<'a> Stage<'a> {
                 r,
                 material,
             };
-            // On a moving board the list vouches only for the touch at the start: the
-            // event loop resolves it, as for a marble that spins.
-            let out = if w0.is_some() || boards[tc.piece.board()].is_moving() {
-                touches.clear();
-                touches.insert(tc, tol);
-                Some(resolve(
-                    boards,
-                    Some(&*near),
-                    params,
-                    &marble,
-                    Found::Touching,
-                    touches,
-                    contacts,
-                ))
+            let moving = boards[tc.piece.board()].is_moving();
+            // On a still board, the closed form where it applies.
+            let closed = if moving {
+                None
+            } else if w0.is_some() {
+                resolve_rolling(boards, params, &marble, &tc, contacts)
             } else {
                 resolve_resting(boards, params, &marble, &tc, contacts)
+            };
+            let out = match closed {
+                Some(out) => Some(out),
+                // On a moving board the list vouches only for the touch at the start, and
+                // a spinning marble's friction events need the loop: the event loop on
+                // that one touch.
+                None if moving || w0.is_some() => {
+                    touches.clear();
+                    touches.insert(tc, tol);
+                    Some(resolve(
+                        boards,
+                        Some(&*near),
+                        params,
+                        &marble,
+                        Found::Touching,
+                        touches,
+                        contacts,
+                    ))
+                }
+                None => None,
             };
             if let Some(out) = out {
                 (position.0, carry.0) =

@@ -9,7 +9,7 @@
 //! | `AccumulateForces` | `forces.rs` | acceleration = gravity + force / mass |
 //! | `MarbleContacts` | `collide.rs` | touching marble pairs: collisions at the start, friction, contact forces, overlap (only with `marble_collisions`) |
 //! | `Integrate` | `integrate.rs` | free motion over the substep with the chosen integrator |
-//! | `DetectContacts` | `detect.rs` | touches at the start (collision or contact), else the first impact (CCD) or the end overlap; marbles resting, sliding or rolling on one piece with nothing else near are resolved here (in closed form when they do not spin) |
+//! | `DetectContacts` | `detect.rs` | touches at the start (collision or contact), else the first impact (CCD) or the end overlap; marbles resting, sliding or rolling on one piece with nothing else near are resolved here (in closed form on a still board, unless a spinning marble's friction event falls inside the substep; by the event loop on that touch otherwise) |
 //! | `Respond` | `respond.rs` | impacts and contacts of the marbles detection flagged |
 //! | `CollideMarbles` | `collide.rs` | marble pairs that meet inside the substep collide at their time of impact (only with `marble_collisions`) |
 //! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities |
