@@ -1275,11 +1275,13 @@ impl PairSolver {
                 if i == j {
                     return;
                 }
-                // Most candidates do not overlap: the distance test comes first.
-                if let Some(row) = late_row(bodies, event, i, j, p)
+                // Most candidates do not overlap, and in a pile most that do are rows
+                // already: the distance test, then the row lookup, then the tracing back.
+                if late_touch(bodies, i, j, p)
                     && !known
                         [known_start[i as usize] as usize..known_start[i as usize + 1] as usize]
                         .contains(&j)
+                    && let Some(row) = late_row(bodies, event, i, j, p)
                 {
                     late.push(row);
                 }
@@ -1909,16 +1911,24 @@ fn candidate_pairs<'a>(
         .copied()
 }
 
+/// Whether marbles `i` and `j` touch or overlap at the end of the substep (the test
+/// [`late_row`] starts with).
+#[inline]
+fn late_touch(bodies: &[Body], i: u32, j: u32, p: &PairParams) -> bool {
+    let (a, b) = (&bodies[i as usize], &bodies[j as usize]);
+    let tol = crate::narrow::touch_tolerance(p.tolerance, a.r.min(b.r), a.x.abs().max(b.x.abs()));
+    (b.x - a.x).length() - (a.r + b.r) <= tol
+}
+
 /// A pair of marbles `i < j` that a collision sent into each other off their free paths,
 /// found overlapping (or touching) at the end of the substep: back along their new straight
 /// paths to the later of their last impacts, then forward to where they meet.
 fn late_row(bodies: &[Body], event: &[f32], i: u32, j: u32, p: &PairParams) -> Option<Row> {
-    let (a, b) = (&bodies[i as usize], &bodies[j as usize]);
-    let d = b.x - a.x;
-    let tol = crate::narrow::touch_tolerance(p.tolerance, a.r.min(b.r), a.x.abs().max(b.x.abs()));
-    if d.length() - (a.r + b.r) > tol {
+    if !late_touch(bodies, i, j, p) {
         return None;
     }
+    let (a, b) = (&bodies[i as usize], &bodies[j as usize]);
+    let d = b.x - a.x;
     let te = event[i as usize].max(event[j as usize]);
     let rest = p.h - te;
     let de = d - (b.v - a.v) * rest;
