@@ -1237,6 +1237,74 @@ mod tests {
         assert!(compared == 4000 && lone > 150, "{lone} lone touches");
     }
 
+    /// The event loop's result for a marble touching what [`gather`] finds at its start,
+    /// and its records: the reference the closed forms are checked against.
+    fn event_loop(
+        cache: &BoardCache,
+        p: &crate::response::SubstepParams,
+        m: &crate::response::MarbleIn,
+        tol: f32,
+    ) -> (crate::response::MarbleOut, crate::components::Contacts) {
+        let mut touches = TouchList::default();
+        gather(
+            &cache.boards,
+            None,
+            0.0,
+            m.x0,
+            m.r,
+            tol,
+            &m.material,
+            -m.v0,
+            &mut touches,
+        );
+        let mut full = crate::components::Contacts::default();
+        let out = crate::response::resolve(
+            &cache.boards,
+            None,
+            p,
+            m,
+            crate::response::Found::Touching,
+            &mut touches,
+            &mut full,
+        );
+        (out, full)
+    }
+
+    /// Substep parameters for case `k` of a closed-form test: the four integrators in turn,
+    /// continuous collision on.
+    fn case_params(k: usize, h: f32) -> crate::response::SubstepParams {
+        use crate::config::Integrator;
+        crate::response::SubstepParams {
+            h,
+            integrator: [
+                Integrator::SemiImplicitEuler,
+                Integrator::VelocityVerlet,
+                Integrator::Rk4,
+                Integrator::ExplicitEuler,
+            ][k % 4],
+            ccd: true,
+            threshold: 0.05,
+            tolerance: 1e-4,
+            max_impacts: 8,
+        }
+    }
+
+    /// A marble's records, bit for bit.
+    fn records(
+        c: &crate::components::Contacts,
+    ) -> Vec<(PieceId, crate::components::ContactKind, u32, [u32; 3])> {
+        c.iter()
+            .map(|c| {
+                (
+                    c.piece,
+                    c.kind,
+                    c.closing_speed.to_bits(),
+                    c.normal.to_array().map(f32::to_bits),
+                )
+            })
+            .collect()
+    }
+
     /// The closed form for a marble resting or sliding on one piece
     /// ([`crate::response::resolve_resting`]) gives the event loop's result, bit for bit,
     /// whenever it applies: on the floor, slow or fast, approaching (a collision) or not,
@@ -1244,27 +1312,13 @@ mod tests {
     #[test]
     fn resting_closed_form_is_the_event_loop() {
         use crate::components::Contacts;
-        use crate::config::Integrator;
-        use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting};
+        use crate::response::{MarbleIn, resolve_resting};
         let cache = boards(Vec3::ZERO);
         let b = &cache.boards[1];
         let mut rng = Lcg(5);
         let mut applied = 0;
         for k in 0..4000 {
-            let integrator = [
-                Integrator::SemiImplicitEuler,
-                Integrator::VelocityVerlet,
-                Integrator::Rk4,
-                Integrator::ExplicitEuler,
-            ][k % 4];
-            let p = SubstepParams {
-                h: cache.h,
-                integrator,
-                ccd: true,
-                threshold: 0.05,
-                tolerance: 1e-4,
-                max_impacts: 8,
-            };
+            let p = case_params(k, cache.h);
             let x0 = near_the_box(&cache, &mut rng);
             let tol = touch_tolerance(p.tolerance, R, x0);
             let speed = if k % 3 == 0 { 0.02 } else { 0.5 };
@@ -1298,40 +1352,14 @@ mod tests {
             let Some(closed) = resolve_resting(&cache.boards, &p, &m, &tc, &mut fast) else {
                 continue;
             };
-            let mut touches = TouchList::default();
-            gather(
-                &cache.boards,
-                None,
-                0.0,
-                x0,
-                R,
-                tol,
-                &m.material,
-                -m.v0,
-                &mut touches,
-            );
-            let mut full = Contacts::default();
-            let looped = resolve(
-                &cache.boards,
-                None,
-                &p,
-                &m,
-                Found::Touching,
-                &mut touches,
-                &mut full,
-            );
+            let (looped, full) = event_loop(&cache, &p, &m, tol);
             let bits = |v: Vec3| v.to_array().map(f32::to_bits);
             assert_eq!(
                 (bits(closed.d), bits(closed.v)),
                 (bits(looped.d), bits(looped.v)),
                 "case {k}"
             );
-            let record = |c: &Contacts| {
-                c.iter()
-                    .map(|c| (c.piece, c.kind, c.closing_speed.to_bits(), bits(c.normal)))
-                    .collect::<Vec<_>>()
-            };
-            assert_eq!(record(&fast), record(&full), "case {k}");
+            assert_eq!(records(&fast), records(&full), "case {k}");
             applied += 1;
         }
         assert!(applied > 400, "applied {applied} times");
@@ -1345,27 +1373,13 @@ mod tests {
     #[test]
     fn rolling_closed_form_is_the_event_loop() {
         use crate::components::Contacts;
-        use crate::config::Integrator;
-        use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_rolling};
+        use crate::response::{MarbleIn, resolve_rolling};
         let cache = boards(Vec3::ZERO);
         let b = &cache.boards[1];
         let mut rng = Lcg(7);
         let (mut applied, mut declined) = (0, 0);
         for k in 0..4000 {
-            let integrator = [
-                Integrator::SemiImplicitEuler,
-                Integrator::VelocityVerlet,
-                Integrator::Rk4,
-                Integrator::ExplicitEuler,
-            ][k % 4];
-            let p = SubstepParams {
-                h: cache.h,
-                integrator,
-                ccd: true,
-                threshold: 0.05,
-                tolerance: 1e-4,
-                max_impacts: 8,
-            };
+            let p = case_params(k, cache.h);
             let x0 = near_the_box(&cache, &mut rng);
             let tol = touch_tolerance(p.tolerance, R, x0);
             let speed = if k % 3 == 0 { 0.02 } else { 0.5 };
@@ -1402,40 +1416,14 @@ mod tests {
                 declined += 1;
                 continue;
             };
-            let mut touches = TouchList::default();
-            gather(
-                &cache.boards,
-                None,
-                0.0,
-                x0,
-                R,
-                tol,
-                &m.material,
-                -m.v0,
-                &mut touches,
-            );
-            let mut full = Contacts::default();
-            let looped = resolve(
-                &cache.boards,
-                None,
-                &p,
-                &m,
-                Found::Touching,
-                &mut touches,
-                &mut full,
-            );
+            let (looped, full) = event_loop(&cache, &p, &m, tol);
             let bits = |v: Vec3| v.to_array().map(f32::to_bits);
             assert_eq!(
                 (bits(closed.d), bits(closed.v), bits(closed.w)),
                 (bits(looped.d), bits(looped.v), bits(looped.w)),
                 "case {k}"
             );
-            let record = |c: &Contacts| {
-                c.iter()
-                    .map(|c| (c.piece, c.kind, c.closing_speed.to_bits(), bits(c.normal)))
-                    .collect::<Vec<_>>()
-            };
-            assert_eq!(record(&fast), record(&full), "case {k}");
+            assert_eq!(records(&fast), records(&full), "case {k}");
             applied += 1;
         }
         assert!(
