@@ -730,6 +730,8 @@ pub struct PairSolver {
     /// With the spheres: each body's radius and entity.
     radii: Vec<f32>,
     gathered: Vec<Entity>,
+    /// The contact stage's free displacements, kept from the sphere gather for the bodies.
+    pub(crate) paths: Vec<Vec3>,
     /// Per body: outside its bound at the last cover, and the list of those.
     stray: Vec<bool>,
     strays: Vec<u32>,
@@ -805,6 +807,7 @@ impl PairSolver {
         self.spheres.clear();
         self.radii.clear();
         self.gathered.clear();
+        self.paths.clear();
     }
 
     /// A marble's broad-phase sphere (centre, radius), its radius and entity.
@@ -1127,6 +1130,7 @@ impl PairSolver {
         self.stray.reserve(n);
         self.radii.reserve(n);
         self.gathered.reserve(n);
+        self.paths.reserve(n);
         self.strays.reserve(n);
         self.extra.reserve(pairs);
         self.scratch_bound.reserve(n);

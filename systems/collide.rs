@@ -112,6 +112,7 @@ pub fn marble_contacts(
         let d = free_path(&config, h, velocity.0, acceleration.0, contacts);
         let sphere = PairSolver::contact_sphere(&params, position.0, d, radius.0);
         solver.push_sphere(entity, sphere, radius.0);
+        solver.paths.push(d);
     }
     if !solver.cover_gathered() {
         solver.forget_contacts();
@@ -119,12 +120,16 @@ pub fn marble_contacts(
     }
     solver.bodies.clear();
     for (
-        entity,
-        (position, _, velocity, acceleration),
-        (radius, mass, restitution, contacts),
-        (spin, friction),
-    ) in &marbles
+        k,
+        (
+            entity,
+            (position, _, velocity, acceleration),
+            (radius, mass, restitution, _),
+            (spin, friction),
+        ),
+    ) in marbles.iter().enumerate()
     {
+        let d = solver.paths[k];
         solver.bodies.push(Body {
             entity,
             x: position.0,
@@ -135,7 +140,7 @@ pub fn marble_contacts(
             r: radius.0,
             e: restitution.0,
             a: acceleration.0,
-            d: free_path(&config, h, velocity.0, acceleration.0, contacts),
+            d,
             omega: spin.as_ref().map_or(Vec3::ZERO, |w| w.0),
             spins: config.rolling && spin.is_some(),
             mu: friction.map_or(0.0, |f| f.0),
