@@ -53,8 +53,9 @@
 //!    pile's weight carries over), each update over-relaxed by 1.5 (successive
 //!    over-relaxation: a pile's weight crosses its layers in about half the passes plain
 //!    Gauss–Seidel needs; measured below). The pair rows are visited in colour order (no
-//!    two rows of a colour share a marble, greedily coloured each substep), so that
-//!    consecutive updates do not wait on each other. Without the speculative rows, a marble a micrometre
+//!    two rows of a colour share a marble, greedily coloured each substep), four rows of a
+//!    colour at a time in SIMD lanes (each lane does the one-row update's operations in its
+//!    order, so the result is bit for bit that of one row after another). Without the speculative rows, a marble a micrometre
 //!    above its support falls freely for a substep and lands at `g h`: a settled pile
 //!    would keep jittering at centimetres per second. The impulses are then applied as *forces
 //!    over the substep* (added to each marble's acceleration), so every integrator moves
@@ -117,7 +118,7 @@ use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
 use bevy_ecs::prelude::*;
-use glam::{IVec3, Vec3, Vec4};
+use glam::{IVec3, Mat4, Vec3, Vec4};
 
 use crate::components::ContactKind;
 use crate::geometry::PieceId;
@@ -176,6 +177,10 @@ const STRAY_SHARE: usize = 8;
 
 /// Rounds of looking for what collided marbles run into on their new paths.
 const LATE_ROUNDS: usize = 4;
+
+/// Colours of the pair rows in the contact passes (the last takes every row that finds no
+/// other free, so its rows may share marbles).
+const COLOURS: usize = 32;
 
 /// Over-relaxation of the contact passes (projected successive over-relaxation; 1 is plain
 /// Gauss–Seidel, and it converges for any value below 2). Measured on the 1,000-marble
@@ -383,6 +388,21 @@ impl PairGs {
         (a - (d * a.w) * n, b + (d * b.w) * n)
     }
 
+    /// One projected, over-relaxed update of the row (module docs, step 4), branch-free: a
+    /// row that does not change applies zero. Returns the running maximum `largest` of the
+    /// velocity changes.
+    #[inline(always)]
+    fn pass(&mut self, vel: &mut [Vel], largest: f32) -> f32 {
+        let (i, j) = (self.i as usize, self.j as usize);
+        let (a, b) = (vel[i], vel[j]);
+        let u = self.closing(a, b);
+        let next = (self.lambda - u * self.k * RELAXATION).max(0.0);
+        let d = next - self.lambda;
+        self.lambda = next;
+        (vel[i], vel[j]) = self.applied(a, b, d);
+        larger(largest, d.abs() / self.k)
+    }
+
     /// The closing speed of `a` and `b` along the normal less the row's target, `Vec3::dot`'s
     /// sum order, so the same bits as on `Vec3`s.
     #[inline(always)]
@@ -396,6 +416,79 @@ impl PairGs {
 /// one 16-byte lane set, so that a row reads and writes each of its marbles with one load
 /// and one store.
 type Vel = Vec4;
+
+/// Four pair rows of one colour side by side, a row to a lane. No two of them share a
+/// marble, so updating them together is updating them one after another, and each lane
+/// does [`PairGs::pass`]'s operations in its order: the same bits, four rows at a time.
+#[derive(Clone, Copy, Debug)]
+struct RowBlock {
+    i: [u32; 4],
+    j: [u32; 4],
+    /// The normals' `x`, `y` and `z`.
+    n: [Vec4; 3],
+    k: Vec4,
+    lambda: Vec4,
+    target: Vec4,
+}
+
+impl RowBlock {
+    /// The block of four rows.
+    fn new(r: &[PairGs; 4]) -> RowBlock {
+        let lanes = |f: fn(&PairGs) -> f32| Vec4::new(f(&r[0]), f(&r[1]), f(&r[2]), f(&r[3]));
+        RowBlock {
+            i: r.each_ref().map(|r| r.i),
+            j: r.each_ref().map(|r| r.j),
+            n: [lanes(|r| r.n.x), lanes(|r| r.n.y), lanes(|r| r.n.z)],
+            k: lanes(|r| r.k),
+            lambda: lanes(|r| r.lambda),
+            target: lanes(|r| r.target),
+        }
+    }
+
+    /// [`PairGs::pass`] on the four rows; `wide` is the running maximum by lane.
+    #[inline(always)]
+    fn pass(&mut self, vel: &mut [Vel], wide: Vec4) -> Vec4 {
+        let [i0, i1, i2, i3] = self.i.map(|i| i as usize);
+        let [j0, j1, j2, j3] = self.j.map(|j| j as usize);
+        // By lane: x_axis holds the four marbles' x, and so on (w: inverse masses).
+        let a = Mat4::from_cols(vel[i0], vel[i1], vel[i2], vel[i3]).transpose();
+        let b = Mat4::from_cols(vel[j0], vel[j1], vel[j2], vel[j3]).transpose();
+        let [nx, ny, nz] = self.n;
+        let u =
+            (b.x_axis - a.x_axis) * nx + (b.y_axis - a.y_axis) * ny + (b.z_axis - a.z_axis) * nz
+                - self.target;
+        let next = (self.lambda - u * self.k * RELAXATION).max(Vec4::ZERO);
+        let d = next - self.lambda;
+        self.lambda = next;
+        let (sa, sb) = (d * a.w_axis, d * b.w_axis);
+        let a = Mat4::from_cols(
+            a.x_axis - sa * nx,
+            a.y_axis - sa * ny,
+            a.z_axis - sa * nz,
+            a.w_axis,
+        )
+        .transpose();
+        let b = Mat4::from_cols(
+            b.x_axis + sb * nx,
+            b.y_axis + sb * ny,
+            b.z_axis + sb * nz,
+            b.w_axis,
+        )
+        .transpose();
+        (vel[i0], vel[i1], vel[i2], vel[i3]) = (a.x_axis, a.y_axis, a.z_axis, a.w_axis);
+        (vel[j0], vel[j1], vel[j2], vel[j3]) = (b.x_axis, b.y_axis, b.z_axis, b.w_axis);
+        // `larger` lane by lane.
+        (d.abs() / self.k).max(wide)
+    }
+}
+
+/// The rows of one colour in the passes: `blocks` of four, then the rest one by one
+/// (`tail`, slots of [`PairSolver::pair_pass`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct ColourSpan {
+    blocks: (u32, u32),
+    tail: (u32, u32),
+}
 
 /// A board row of the contact passes (compact copy of a [`Constraint`]).
 #[derive(Clone, Copy, Debug)]
@@ -808,6 +901,11 @@ pub struct PairSolver {
     /// colour share a marble), and each row's slot there.
     pair_pass: Vec<PairGs>,
     pair_slot: Vec<u32>,
+    /// The colours' rows by four ([`RowBlock`]), the first slot of each block, and where
+    /// each colour's blocks and single rows are.
+    blocks: Vec<RowBlock>,
+    block_first: Vec<u32>,
+    spans: Vec<ColourSpan>,
     /// Colours used by each marble's rows so far (a bit per colour).
     colours: Vec<u32>,
     board_gs: Vec<BoardGs>,
@@ -1141,6 +1239,9 @@ impl PairSolver {
         self.pair_gs.reserve(pairs);
         self.pair_pass.reserve(pairs);
         self.pair_slot.reserve(pairs);
+        self.blocks.reserve(pairs / 4);
+        self.block_first.reserve(pairs / 4);
+        self.spans.reserve(COLOURS);
         self.colours.reserve(n);
         self.board_gs.reserve(touches);
         self.vel.reserve(n);
@@ -1611,7 +1712,7 @@ impl PairSolver {
     /// rows then rarely share a marble, so that one row's update does not wait on the one
     /// before it.
     fn colour_rows(&mut self) {
-        const LAST: u32 = 31;
+        const LAST: u32 = COLOURS as u32 - 1;
         self.colours.clear();
         self.colours.resize(self.bodies.len(), 0);
         let mut count = [0u32; LAST as usize + 2];
@@ -1627,6 +1728,7 @@ impl PairSolver {
         for c in 1..count.len() {
             count[c] += count[c - 1];
         }
+        let starts = count;
         // Scatter by colour (stable), remembering each row's index.
         self.pair_pass.clear();
         self.pair_pass.resize(
@@ -1646,6 +1748,33 @@ impl PairSolver {
             count[c] += 1;
             self.pair_pass[slot] = *r;
             self.pair_slot[k] = slot as u32;
+        }
+        // Each colour's rows by four, the rest one by one; the last colour's rows may
+        // share marbles, so they all go one by one.
+        self.spans.clear();
+        self.blocks.clear();
+        self.block_first.clear();
+        for c in 0..COLOURS {
+            let (start, end) = (starts[c], starts[c + 1]);
+            if start == end {
+                continue;
+            }
+            let wide_end = if c < LAST as usize {
+                start + (end - start) / 4 * 4
+            } else {
+                start
+            };
+            let first_block = self.blocks.len() as u32;
+            for first in (start..wide_end).step_by(4) {
+                let f = first as usize;
+                let rows: &[PairGs; 4] = self.pair_pass[f..f + 4].try_into().expect("four rows");
+                self.blocks.push(RowBlock::new(rows));
+                self.block_first.push(first);
+            }
+            self.spans.push(ColourSpan {
+                blocks: (first_block, self.blocks.len() as u32),
+                tail: (wide_end, end),
+            });
         }
     }
 
@@ -1744,19 +1873,20 @@ impl PairSolver {
                 r.apply(vel, r.lambda);
             }
         }
+        let (blocks, pass) = (&mut self.blocks, &mut self.pair_pass);
         for _ in 0..p.iterations {
+            // Colour by colour, its blocks of four and then its single rows.
+            let mut wide = Vec4::ZERO;
             let mut largest = 0.0f32;
-            for r in self.pair_pass.iter_mut() {
-                // Branch-free: a row that does not change applies zero.
-                let (i, j) = (r.i as usize, r.j as usize);
-                let (a, b) = (vel[i], vel[j]);
-                let u = r.closing(a, b);
-                let next = (r.lambda - u * r.k * RELAXATION).max(0.0);
-                let d = next - r.lambda;
-                r.lambda = next;
-                (vel[i], vel[j]) = r.applied(a, b, d);
-                largest = larger(largest, d.abs() / r.k);
+            for span in &self.spans {
+                for b in &mut blocks[span.blocks.0 as usize..span.blocks.1 as usize] {
+                    wide = b.pass(vel, wide);
+                }
+                for r in &mut pass[span.tail.0 as usize..span.tail.1 as usize] {
+                    largest = r.pass(vel, largest);
+                }
             }
+            largest = larger(largest, wide.max_element());
             for r in self.board_gs.iter_mut() {
                 let u = (vel[r.i as usize].truncate() - r.vb).dot(r.n);
                 if let Some(d) = accumulate(&mut r.lambda, u, r.k) {
@@ -1766,6 +1896,12 @@ impl PairSolver {
             }
             if largest < CONVERGED {
                 break;
+            }
+        }
+        for (b, &first) in self.blocks.iter().zip(&self.block_first) {
+            let rows = &mut self.pair_pass[first as usize..first as usize + 4];
+            for (r, lambda) in rows.iter_mut().zip(b.lambda.to_array()) {
+                r.lambda = lambda;
             }
         }
         for (r, &slot) in self.pair_gs.iter_mut().zip(&self.pair_slot) {
@@ -2126,6 +2262,51 @@ mod tests {
             checked[LateSearch::Direct as usize] > 0 && checked[LateSearch::OwnGrid as usize] > 0,
             "both searches ran: {checked:?}"
         );
+    }
+
+    /// Four rows of a colour updated together in SIMD lanes give bit for bit what the
+    /// rows give one after another: velocities, impulses and the running maximum, over
+    /// random rows, masses, impulses (zero ones among them) and velocities.
+    #[test]
+    fn row_blocks_are_four_single_rows() {
+        let mut seed = 0x9e37_79b9u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
+        };
+        for _ in 0..2000 {
+            let vel: Vec<Vel> = (0..8)
+                .map(|_| Vec4::new(rnd(), rnd(), rnd(), 1.0 + 100.0 * rnd().abs()))
+                .collect();
+            // Marbles 0..4 against 4..8 in a shuffled order: no two rows share a marble.
+            let rows: [PairGs; 4] = std::array::from_fn(|k| {
+                let n = Vec3::new(rnd(), rnd(), rnd()).normalize();
+                let (i, j) = (k as u32, 4 + ((k as u32 + 1) % 4));
+                PairGs {
+                    i,
+                    j,
+                    n,
+                    k: 1.0 / (vel[i as usize].w + vel[j as usize].w),
+                    lambda: if rnd() > 0.0 { 0.0 } else { rnd().abs() },
+                    target: 0.1 * rnd(),
+                }
+            });
+            let (mut one, mut rows_one, mut largest) = (vel.clone(), rows, 0.0f32);
+            for r in &mut rows_one {
+                largest = r.pass(&mut one, largest);
+            }
+            let (mut four, mut block) = (vel.clone(), RowBlock::new(&rows));
+            let wide = block.pass(&mut four, Vec4::ZERO);
+            let bits = |v: &[Vel]| {
+                v.iter()
+                    .map(|v| v.to_array().map(f32::to_bits))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(bits(&one), bits(&four));
+            let lambdas = rows_one.map(|r| r.lambda.to_bits());
+            assert_eq!(lambdas, block.lambda.to_array().map(f32::to_bits));
+            assert_eq!(largest.to_bits(), wide.max_element().to_bits());
+        }
     }
 
     #[test]
