@@ -2264,16 +2264,21 @@ mod tests {
         );
     }
 
+    /// A fixed pseudo-random sequence in [0, 1) from `seed` (a 32-bit LCG).
+    fn uniform(mut seed: u32) -> impl FnMut() -> f32 {
+        move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        }
+    }
+
     /// Four rows of a colour updated together in SIMD lanes give bit for bit what the
     /// rows give one after another: velocities, impulses and the running maximum, over
     /// random rows, masses, impulses (zero ones among them) and velocities.
     #[test]
     fn row_blocks_are_four_single_rows() {
-        let mut seed = 0x9e37_79b9u32;
-        let mut rnd = move || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut uniform = uniform(0x9e37_79b9);
+        let mut rnd = move || uniform() * 2.0 - 1.0;
         for _ in 0..2000 {
             let vel: Vec<Vel> = (0..8)
                 .map(|_| Vec4::new(rnd(), rnd(), rnd(), 1.0 + 100.0 * rnd().abs()))
@@ -2312,11 +2317,7 @@ mod tests {
     #[test]
     fn grid_pairs_match_brute_force() {
         let mut dense = 0;
-        let mut seed = 12345u32;
-        let mut rnd = move || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut rnd = uniform(12345);
         // Spread wide (hashed cells) and packed (the dense table).
         for case in 0..40 {
             let spread = if case % 2 == 0 { 1.0 } else { 0.15 };
@@ -2365,11 +2366,8 @@ mod tests {
     /// and rebuilt.
     #[test]
     fn kept_candidates_cover_every_overlapping_pair() {
-        let mut seed = 99u32;
-        let mut rnd = move || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5
-        };
+        let mut uniform = uniform(99);
+        let mut rnd = move || uniform() - 0.5;
         let r = 0.008;
         let mut solver = PairSolver::default();
         let n = 600;
