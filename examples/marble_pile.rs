@@ -4,9 +4,12 @@
 //! marble moved at 5 cm/s or more (checked every step) and the wall time.
 //!
 //! `cargo run --release --example marble_pile -- [MARBLES] [SUBSTEPS] [SOLVER_PASSES]
-//! [SEED] [SECONDS]` (defaults: 1000, the scene's 8 substeps and 15 passes, the scene's
-//! own start, 6 s). A SEED nudges every marble by up to 5 µm: another start of the same
-//! pour. Try fewer substeps to see why the scene uses 8 (README, "Many marbles").
+//! [SEED] [SECONDS] [SLEEP_MM_S]` (defaults: 1000, the scene's 8 substeps and 15 passes,
+//! the scene's own start, 6 s, no sleeping). A SEED nudges every marble by up to 5 µm:
+//! another start of the same pour. Try fewer substeps to see why the scene uses 8
+//! (README, "Many marbles"). With SLEEP_MM_S, marbles slower than that many mm/s for
+//! half a second fall asleep (`sleep_speed`), and the table counts the sleeping ones and
+//! the wall time of each half second.
 
 use bevy_marble::prelude::*;
 use bevy_marble::scenes;
@@ -25,6 +28,9 @@ fn main() {
     if let Some(passes) = arg(3) {
         scene.solver_iterations = passes as u32;
     }
+    if let Some(sleep) = arg(6) {
+        scene.sleep_speed = sleep as f32 * 1e-3;
+    }
     if let Some(seed) = arg(4) {
         // Nudge every marble by up to 5 µm: another start of the same pour.
         let mut state = seed as u32;
@@ -41,14 +47,22 @@ fn main() {
         "{n} marbles, dt {:.4} s in {} substeps, {} solver passes",
         scene.dt, scene.substeps, scene.solver_iterations
     );
-    println!("  time | fastest m/s | > 5 cm/s | deepest overlap / r | touching pairs");
+    println!(
+        "  time | fastest m/s | > 5 cm/s | deepest overlap / r | touching pairs | asleep | ns per marble-step"
+    );
     let steps = (arg(5).unwrap_or(6) as f32 / scene.dt).round() as u64;
     let every = (0.5 / scene.dt).round() as u64;
     let start = std::time::Instant::now();
     // The last time any marble moved at 5 cm/s or more, checked every step.
     let mut last_moving = 0.0;
+    // Time spent stepping, all and in the current half second.
+    let (mut stepping, mut window) = (std::time::Duration::ZERO, std::time::Duration::ZERO);
     for step in 1..=steps {
+        let t = std::time::Instant::now();
         sim.step();
+        let took = t.elapsed();
+        stepping += took;
+        window += took;
         let fastest_now = (0..n)
             .map(|i| sim.marble_state(i).1.length())
             .fold(0.0, f32::max);
@@ -65,19 +79,41 @@ fn main() {
                 .iter()
                 .map(|c| c.depth)
                 .fold(0.0, f32::max);
+            let world = sim.world();
+            if std::env::var("DBG").is_ok() {
+                let d: Vec<f32> = sim
+                    .marbles()
+                    .iter()
+                    .filter_map(|&m| world.get::<Drowsy>(m).map(|d| d.0))
+                    .collect();
+                eprintln!(
+                    "drowsy count {} min {:?} max {:?} config {:?}",
+                    d.len(),
+                    d.iter().copied().fold(f32::MAX, f32::min),
+                    d.iter().copied().fold(0.0, f32::max),
+                    world.resource::<StepConfig>().sleep
+                );
+            }
+            let asleep = sim
+                .marbles()
+                .iter()
+                .filter(|&&m| world.get::<Sleeping>(m).is_some())
+                .count();
             println!(
-                "{:5.1} s | {fastest:11.4} | {moving:8} | {:19.4} | {}",
+                "{:5.1} s | {fastest:11.4} | {moving:8} | {:19.4} | {:14} | {asleep:6} | {:.0}",
                 step as f32 * scene.dt,
                 deepest / r,
-                contacts.len()
+                contacts.len(),
+                window.as_nanos() as f64 / (every as f64 * n as f64)
             );
+            window = std::time::Duration::ZERO;
         }
     }
     let elapsed = start.elapsed();
     println!("last marble at 5 cm/s or more: {last_moving:.2} s");
     println!(
-        "{:.2} s wall, {:.0} ns per marble-step",
+        "{:.2} s wall, {:.0} ns per marble-step stepping",
         elapsed.as_secs_f64(),
-        elapsed.as_nanos() as f64 / (steps as f64 * n as f64)
+        stepping.as_nanos() as f64 / (steps as f64 * n as f64)
     );
 }

@@ -15,6 +15,7 @@ pub mod scene;
 pub mod scenes;
 pub mod schedule;
 pub mod simulation;
+pub mod sleep;
 pub mod study;
 
 // The ECS systems live in the top-level `systems/` folder, one file per stage, so that the
@@ -34,7 +35,7 @@ pub mod prelude {
         AngularVelocity, Board, Collider, Contact, ContactKind, Contacts, Force, Friction, Marble,
         Mass, Position, Quarantined, Radius, Restitution, Rotation, Velocity,
     };
-    pub use crate::config::{GravityTilt, Integrator, Preset, StepConfig};
+    pub use crate::config::{GravityTilt, Integrator, Preset, Sleep, StepConfig};
     pub use crate::geometry::{BoardGeometry, PartShape};
     pub use crate::pairs::{MarbleContact, MarbleContacts};
     #[cfg(feature = "bevy")]
@@ -42,4 +43,5 @@ pub mod prelude {
     pub use crate::scene::{BoardDesc, MarbleDesc, Scene, SceneError, ShapeDesc};
     pub use crate::schedule::{MarbleSubstep, MarbleSystems};
     pub use crate::simulation::Simulation;
+    pub use crate::sleep::{Drowsy, Sleeping};
 }

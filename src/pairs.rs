@@ -548,7 +548,7 @@ type KeyMap = HashMap<(u64, u64), f32, BuildHasherDefault<KeyHasher>>;
 
 /// The hashed uniform grid of the broad phase (buffers reused between substeps).
 #[derive(Default, Debug)]
-struct Grid {
+pub(crate) struct Grid {
     cell: f32,
     mask: u32,
     /// Dense mode: the lowest cell (less one in every axis) and the cell counts, when the
@@ -606,7 +606,7 @@ fn hash_cell(c: IVec3) -> u32 {
 
 impl Grid {
     /// Sizes the buffers for `n` bodies.
-    fn reserve(&mut self, n: usize) {
+    pub(crate) fn reserve(&mut self, n: usize) {
         self.bucket.reserve(n);
         self.start.reserve(8 * n + 66);
         self.order.reserve(n);
@@ -616,7 +616,7 @@ impl Grid {
     }
 
     /// Sorts the bodies into cells from their bound spheres `b` (centre, radius).
-    fn build(&mut self, b: &[Vec4]) {
+    pub(crate) fn build(&mut self, b: &[Vec4]) {
         let n = b.len();
         self.large.clear();
         self.order.clear();
@@ -717,7 +717,7 @@ impl Grid {
     }
 
     /// Calls `f(j)` for every body whose bound sphere overlaps sphere `s` (centre, radius).
-    fn query(&self, b: &[Vec4], s: Vec4, mut f: impl FnMut(u32)) {
+    pub(crate) fn query(&self, b: &[Vec4], s: Vec4, mut f: impl FnMut(u32)) {
         let near = |q: Vec4| {
             let r = s.w + q.w;
             (s.truncate() - q.truncate()).length_squared() <= r * r
@@ -755,7 +755,7 @@ impl Grid {
     }
 
     /// Calls `f(i, j)` once for every pair of bodies whose bound spheres overlap.
-    fn pairs(&self, b: &[Vec4], mut f: impl FnMut(u32, u32)) {
+    pub(crate) fn pairs(&self, b: &[Vec4], mut f: impl FnMut(u32, u32)) {
         let near = |p: Vec4, q: Vec4| {
             let r = p.w + q.w;
             (p.truncate() - q.truncate()).length_squared() <= r * r

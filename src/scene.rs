@@ -12,7 +12,7 @@ use parry3d::utils::Array2;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::config::{Integrator, Preset, StepConfig};
+use crate::config::{Integrator, Preset, Sleep, StepConfig};
 use crate::geometry::{BoardGeometry, PartShape};
 
 /// Why a scene could not be loaded or used. Each is the user's input at fault.
@@ -82,6 +82,15 @@ pub struct Scene {
     pub tilt_as_gravity: bool,
     /// Collision-versus-contact threshold, m/s, ≥ 0.
     pub restitution_threshold: f32,
+    /// Marbles whose touching group stays slower than this (m/s) for `sleep_time` fall
+    /// asleep until something wakes them ([`crate::sleep`]); 0 (the default) never. ≥ 0. An
+    /// extension of the contract.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub sleep_speed: f32,
+    /// Seconds a touching group must stay slower than `sleep_speed` before it sleeps, > 0
+    /// (default 0.5). An extension of the contract.
+    #[serde(skip_serializing_if = "is_default_sleep_time")]
+    pub sleep_time: f32,
     /// Seconds `marble run` simulates without `--steps`, ≥ 0.
     pub duration: f32,
     /// Boards.
@@ -105,6 +114,8 @@ impl Default for Scene {
             solver_iterations: c.solver_iterations,
             tilt_as_gravity: false,
             restitution_threshold: c.restitution_threshold,
+            sleep_speed: 0.0,
+            sleep_time: DEFAULT_SLEEP_TIME,
             duration: 10.0,
             boards: Vec::new(),
             marbles: Vec::new(),
@@ -272,6 +283,17 @@ fn is_false(b: &bool) -> bool {
     !*b
 }
 
+/// Default of [`Scene::sleep_time`], s.
+const DEFAULT_SLEEP_TIME: f32 = 0.5;
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
+}
+
+fn is_default_sleep_time(x: &f32) -> bool {
+    *x == DEFAULT_SLEEP_TIME
+}
+
 fn identity_rotation() -> [f32; 4] {
     [0.0, 0.0, 0.0, 1.0]
 }
@@ -365,6 +387,8 @@ impl Scene {
             }
         }
         non_negative("duration", self.duration)?;
+        non_negative("sleep_speed", self.sleep_speed)?;
+        positive("sleep_time", self.sleep_time)?;
         if self.solver_iterations == 0 {
             return invalid("solver_iterations", ">= 1", self.solver_iterations);
         }
@@ -471,6 +495,10 @@ impl Scene {
             rolling: self.rolling,
             marble_collisions: self.marble_collisions,
             solver_iterations: self.solver_iterations,
+            sleep: (self.sleep_speed > 0.0).then_some(Sleep {
+                speed: self.sleep_speed,
+                time: self.sleep_time,
+            }),
             ..StepConfig::default()
         };
         if let Some(preset) = self.preset {

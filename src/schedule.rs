@@ -4,6 +4,7 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::{LogLevel, ScheduleBuildSettings, ScheduleLabel};
 
 use crate::config::{StepConfig, SubstepCounter};
+use crate::sleep;
 use crate::systems::{boards, collide, detect, forces, integrate, respond};
 
 /// The schedule that runs one substep. A step runs it `substeps` times
@@ -64,7 +65,14 @@ pub fn substep_schedule() -> Schedule {
             .chain(),
     );
     schedule.add_systems((
-        boards::prepare_boards.in_set(MarbleSystems::PrepareBoards),
+        (
+            boards::prepare_boards,
+            sleep::wake
+                .run_if(sleep::sleep_on)
+                .run_if(sleep::first_substep),
+        )
+            .chain()
+            .in_set(MarbleSystems::PrepareBoards),
         forces::accumulate_forces.in_set(MarbleSystems::AccumulateForces),
         integrate::integrate.in_set(MarbleSystems::Integrate),
         (detect::detect_contacts, detect::detect_contacts_spinning)
@@ -88,7 +96,11 @@ pub fn substep_schedule() -> Schedule {
         )
             .chain()
             .in_set(MarbleSystems::MoveBoards),
-        (forces::clear_forces, forces::quarantine_non_finite)
+        (
+            forces::clear_forces,
+            forces::quarantine_non_finite,
+            sleep::fall_asleep.run_if(sleep::sleep_on),
+        )
             .chain()
             .in_set(MarbleSystems::Finish)
             .run_if(forces::last_substep),
@@ -107,6 +119,7 @@ pub fn init_resources(world: &mut World) {
     world.init_resource::<crate::narrow::BoardCache>();
     world.init_resource::<crate::pairs::PairSolver>();
     world.init_resource::<crate::pairs::MarbleContacts>();
+    world.init_resource::<crate::sleep::SleepState>();
 }
 
 /// Runs one step: `substeps` runs of the substep schedule through `run_substep`.

@@ -12,6 +12,7 @@ use crate::components::{
 use crate::config::StepConfig;
 use crate::narrow::BoardCache;
 use crate::pairs::{BoardTouch, Body, MarbleContacts, PairParams, PairSolver};
+use crate::sleep::Sleeping;
 
 fn params(config: &StepConfig, h: f32) -> PairParams {
     PairParams {
@@ -99,7 +100,7 @@ pub fn marble_contacts(
             (&Radius, &Mass, &Restitution, &Contacts),
             (Option<&mut AngularVelocity>, Option<&Friction>),
         ),
-        (With<Marble>, Without<Quarantined>),
+        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
     >,
 ) {
     let h = cache.h;
@@ -194,7 +195,7 @@ pub fn collide_marbles(
             (&mut Position, &mut PositionCarry, &mut Velocity),
             (&StepStart, &Radius, &Mass, &Restitution, &Contacts),
         ),
-        (With<Marble>, Without<Quarantined>),
+        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
     >,
 ) {
     let h = cache.h;

@@ -12,6 +12,7 @@ use crate::narrow::{
     BoardCache, Material, NearPieces, Path, TouchList, earliest_impact, gather, touch_tolerance,
 };
 use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting, resolve_rolling};
+use crate::sleep::Sleeping;
 
 /// A rebuilt [`NearPieces`] list reaches this many substeps of the marble's motion beyond
 /// it (within two and eight radii; a marble moving more than four radii a substep gets
@@ -39,7 +40,12 @@ pub fn detect_contacts(
             &Restitution,
             (&mut Contacts, &mut NearPieces),
         ),
-        (With<Marble>, Without<Quarantined>, Without<AngularVelocity>),
+        (
+            With<Marble>,
+            Without<Quarantined>,
+            Without<Sleeping>,
+            Without<AngularVelocity>,
+        ),
     >,
 ) {
     let stage = Stage::new(&config, &cache);
@@ -102,7 +108,7 @@ pub fn detect_contacts_spinning(
             ),
             (&mut Contacts, &mut NearPieces),
         ),
-        (With<Marble>, Without<Quarantined>),
+        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
     >,
 ) {
     let stage = Stage::new(&config, &cache);

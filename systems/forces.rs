@@ -4,13 +4,17 @@ use bevy_ecs::prelude::*;
 
 use crate::components::{Acceleration, Force, Marble, Mass, Position, Quarantined, Velocity};
 use crate::config::{GravityTilt, StepConfig, SubstepCounter};
+use crate::sleep::Sleeping;
 
 /// Acceleration of every marble for this substep: `gravity + Force / mass` (gravity turned
 /// back by the tilt when a [`GravityTilt`] stands in for a turning board).
 pub fn accumulate_forces(
     config: Res<StepConfig>,
     tilt: Option<Res<GravityTilt>>,
-    mut marbles: Query<(&Force, &Mass, &mut Acceleration), (With<Marble>, Without<Quarantined>)>,
+    mut marbles: Query<
+        (&Force, &Mass, &mut Acceleration),
+        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
+    >,
 ) {
     let g = tilt.map_or(config.gravity, |t| t.gravity(config.gravity));
     for (force, mass, mut acceleration) in &mut marbles {
@@ -24,7 +28,7 @@ pub fn last_substep(counter: Res<SubstepCounter>) -> bool {
 }
 
 /// Clears every marble's [`Force`] once the whole step has integrated it.
-pub fn clear_forces(mut forces: Query<&mut Force, With<Marble>>) {
+pub fn clear_forces(mut forces: Query<&mut Force, (With<Marble>, Without<Sleeping>)>) {
     for mut force in &mut forces {
         if force.0 != glam::Vec3::ZERO {
             force.0 = glam::Vec3::ZERO;
@@ -37,7 +41,10 @@ pub fn clear_forces(mut forces: Query<&mut Force, With<Marble>>) {
 /// [`crate::Simulation::quarantined`] reports them.
 pub fn quarantine_non_finite(
     mut commands: Commands,
-    marbles: Query<(Entity, &Position, &Velocity), (With<Marble>, Without<Quarantined>)>,
+    marbles: Query<
+        (Entity, &Position, &Velocity),
+        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
+    >,
 ) {
     for (entity, position, velocity) in &marbles {
         if !(position.is_finite() && velocity.is_finite()) {

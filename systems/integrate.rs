@@ -8,6 +8,7 @@ use crate::components::{
 };
 use crate::config::StepConfig;
 use crate::narrow::BoardCache;
+use crate::sleep::Sleeping;
 
 /// Advances every marble by one substep of free motion with the configured integrator
 /// (position by compensated summation, see [`PositionCarry`]), remembering where it
@@ -23,7 +24,7 @@ pub fn integrate(
             &Acceleration,
             &mut StepStart,
         ),
-        (With<Marble>, Without<Quarantined>),
+        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
     >,
 ) {
     let h = cache.h;

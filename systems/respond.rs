@@ -12,6 +12,7 @@ use crate::narrow::{
     BoardCache, BoardSnapshot, Material, NearPieces, TouchList, gather, touch_tolerance,
 };
 use crate::response::{Found, MarbleIn, MarbleOut, SubstepParams, resolve};
+use crate::sleep::Sleeping;
 
 /// Resolves every flagged marble that does not spin through the substep's event loop
 /// ([`crate::response`]): equation (1) for collisions, removal of approaching velocity for
@@ -31,7 +32,12 @@ pub fn respond(
                 (&mut Contacts, &NearPieces),
             ),
         ),
-        (With<Marble>, Without<Quarantined>, Without<AngularVelocity>),
+        (
+            With<Marble>,
+            Without<Quarantined>,
+            Without<Sleeping>,
+            Without<AngularVelocity>,
+        ),
     >,
 ) {
     let boards = cache.boards.as_slice();
@@ -96,7 +102,7 @@ pub fn respond_spinning(
                 Option<&SpinDamping>,
             ),
         ),
-        (With<Marble>, Without<Quarantined>),
+        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
     >,
 ) {
     let boards = cache.boards.as_slice();

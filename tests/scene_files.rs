@@ -95,6 +95,11 @@ fn invalid_scenes_name_field_and_value() {
         ),
         ("(duration: -1.0)", "duration must be >= 0, got -1"),
         (
+            "(sleep_speed: -0.01)",
+            "sleep_speed must be >= 0, got -0.01",
+        ),
+        ("(sleep_time: 0.0)", "sleep_time must be > 0, got 0"),
+        (
             "(marbles: [(position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0), radius: -0.01)])",
             "marbles[3].radius must be > 0, got -0.01",
         ),

@@ -1,0 +1,344 @@
+//! Sleeping (`sleep_speed`, `sleep_time`; `bevy_marble::sleep`): when marbles fall asleep,
+//! that a sleeping marble stays exactly where it is, and every way of waking one, each
+//! against the exact answer of the same motion awake.
+
+use bevy_marble::prelude::*;
+use bevy_marble::scene::PlaneDesc;
+use bevy_marble::scenes;
+use glam::{Quat, Vec3};
+
+const R: f32 = 0.008;
+/// A step that is exact in binary, so that `sleep_time` is a whole number of steps.
+const DT: f32 = 1.0 / 64.0;
+
+fn asleep(sim: &Simulation, i: usize) -> bool {
+    sim.world().get::<Sleeping>(sim.marbles()[i]).is_some()
+}
+
+/// One marble resting on a level floor (a box whose top face is at y = 0), sleeping on.
+fn resting_on_floor() -> Scene {
+    let floor = BoardDesc::new(ShapeDesc::Cuboid {
+        half_extents: [0.5, 0.05, 0.5],
+    });
+    let mut floor = floor;
+    floor.position = [0.0, -0.05, 0.0];
+    Scene {
+        dt: DT,
+        sleep_speed: 0.01,
+        sleep_time: 0.5,
+        boards: vec![floor],
+        marbles: vec![MarbleDesc::at([0.0, R, 0.0])],
+        ..Scene::default()
+    }
+}
+
+/// A marble at rest on a floor is slow from the first step, so it falls asleep at the end
+/// of step `sleep_time / dt` = 32 and not before; asleep, its position and velocity stay
+/// bit for bit what they were for 200 more steps.
+#[test]
+fn a_resting_marble_sleeps_after_sleep_time_and_stays_put() {
+    let mut sim = Simulation::from_scene(&resting_on_floor()).unwrap();
+    for step in 1..=31 {
+        sim.step();
+        assert!(!asleep(&sim, 0), "asleep after step {step}");
+    }
+    sim.step();
+    assert!(asleep(&sim, 0), "awake after step 32");
+    let (x, v) = sim.marble_state(0);
+    assert_eq!(v, Vec3::ZERO);
+    for _ in 0..200 {
+        sim.step();
+    }
+    let (x2, v2) = sim.marble_state(0);
+    assert_eq!((x2.to_array(), v2), (x.to_array(), Vec3::ZERO));
+    assert!(asleep(&sim, 0));
+}
+
+/// Sleeping off (the default), nothing sleeps; and a marble sliding down a smooth 5°
+/// slope is never slow, so it never sleeps, and slides as the exact answer says:
+/// `s = ½ g sin θ t²` after 1 s (within 0.5%).
+#[test]
+fn moving_marbles_and_scenes_without_sleep_never_sleep() {
+    let mut off = resting_on_floor();
+    off.sleep_speed = 0.0;
+    let mut sim = Simulation::from_scene(&off).unwrap();
+    for _ in 0..100 {
+        sim.step();
+    }
+    assert!(!asleep(&sim, 0));
+
+    let theta = 5f32.to_radians();
+    let rot = Quat::from_rotation_z(theta);
+    let mut plane = BoardDesc::new(ShapeDesc::Plane(PlaneDesc {}));
+    plane.rotation = rot.to_array();
+    let start = rot * Vec3::new(0.0, R, 0.0);
+    let scene = Scene {
+        dt: DT,
+        integrator: Integrator::VelocityVerlet,
+        sleep_speed: 0.01,
+        sleep_time: 0.5,
+        boards: vec![plane],
+        marbles: vec![MarbleDesc::at(start.to_array())],
+        ..Scene::default()
+    };
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..64 {
+        sim.step();
+        assert!(!asleep(&sim, 0));
+    }
+    let s = (sim.marble_state(0).0 - start).length();
+    let want = 0.5 * 9.81 * theta.sin();
+    assert!((s - want).abs() < 5e-3 * want, "slid {s} m, want {want}");
+}
+
+/// A scene without gravity or boards, marble collisions and sleeping on.
+fn space() -> Scene {
+    Scene {
+        gravity: [0.0; 3],
+        dt: DT,
+        marble_collisions: true,
+        sleep_speed: 0.01,
+        sleep_time: 0.5,
+        ..Scene::default()
+    }
+}
+
+/// A marble shot at a sleeping one, head-on, equal masses, e = 0.5: the sleeping marble
+/// falls asleep at step 32 (the shot is far away then), is woken before the shot reaches
+/// it, and the impact gives PHYSICS.md's two-body answer, `v₁' = (1 − e) u / 2`,
+/// `v₂' = (1 + e) u / 2`, within 0.5%.
+#[test]
+fn a_sleeping_marble_is_woken_before_a_marble_hits_it() {
+    let mut scene = space();
+    let u = 1.0;
+    let mut shot = MarbleDesc::at([0.0, 0.0, 0.0]);
+    shot.velocity = [u, 0.0, 0.0];
+    shot.restitution = 0.5;
+    let mut target = MarbleDesc::at([1.0, 0.0, 0.0]);
+    target.restitution = 0.5;
+    scene.marbles = vec![shot, target];
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..40 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 1) && !asleep(&sim, 0));
+    for _ in 0..40 {
+        sim.step();
+    }
+    let (v1, v2) = (sim.marble_state(0).1.x, sim.marble_state(1).1.x);
+    let (want1, want2) = (0.25 * u, 0.75 * u);
+    assert!(
+        (v1 - want1).abs() < 5e-3 * u && (v2 - want2).abs() < 5e-3 * u,
+        "after the impact {v1}, {v2}; want {want1}, {want2}"
+    );
+}
+
+/// A program that gives a sleeping marble a velocity or a force, or moves it, wakes it,
+/// and it then moves exactly as an awake marble would: at the velocity, `x = x₀ + v t`;
+/// under the force (Verlet, no gravity), `x = x₀ + ½ (F/m) t²` over the step.
+#[test]
+fn a_program_that_changes_a_sleeping_marble_wakes_it() {
+    let mut scene = space();
+    scene.integrator = Integrator::VelocityVerlet;
+    scene.marbles = vec![MarbleDesc::at([0.0, 0.0, 0.0])];
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..33 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    let m = sim.marbles()[0];
+
+    // A velocity.
+    let v = Vec3::new(0.3, -0.1, 0.2);
+    sim.world_mut().get_mut::<Velocity>(m).unwrap().0 = v;
+    for _ in 0..10 {
+        sim.step();
+    }
+    assert!(!asleep(&sim, 0));
+    let want = v * (10.0 * DT);
+    let got = sim.marble_state(0).0;
+    assert!((got - want).length() < 1e-6, "{got} against {want}");
+
+    // Stopped, it sleeps again; then a force for one step.
+    sim.world_mut().get_mut::<Velocity>(m).unwrap().0 = Vec3::ZERO;
+    for _ in 0..33 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    let x0 = sim.marble_state(0).0;
+    let mass = 1.0 / sim.world().get::<Mass>(m).unwrap().inverse();
+    let f = Vec3::new(0.0, 0.0, 1e-3);
+    sim.world_mut().get_mut::<Force>(m).unwrap().0 = f;
+    sim.step();
+    assert!(!asleep(&sim, 0));
+    let moved = sim.marble_state(0).0 - x0;
+    let want = f / mass * (0.5 * DT * DT);
+    assert!(
+        (moved - want).length() < 1e-3 * want.length(),
+        "{moved} against {want}"
+    );
+
+    // Moved by hand, it wakes where it was put.
+    for _ in 0..40 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    sim.world_mut().get_mut::<Velocity>(m).unwrap().0 = Vec3::ZERO;
+    sim.world_mut().get_mut::<Position>(m).unwrap().0 = Vec3::new(0.5, 0.0, 0.0);
+    sim.step();
+    assert!(!asleep(&sim, 0));
+    // (Within the rounding that compensated summation still carries from the earlier
+    // motion.)
+    let got = sim.marble_state(0).0;
+    assert!((got - Vec3::new(0.5, 0.0, 0.0)).length() < 1e-6, "{got}");
+}
+
+/// A board that starts to move, or is moved, wakes the marbles on it, and gravity that
+/// changes wakes every marble: a floor rising at 0.2 m/s lifts its marble with it (after
+/// 0.5 s, 0.1 m higher, resting on the floor within 1% of the rise); a floor moved 1 m
+/// down lets its marble fall freely (`½ g t²` after 0.25 s, within 1%); gravity turned
+/// upwards lifts a marble off its floor the same way.
+#[test]
+fn boards_that_move_and_gravity_that_changes_wake_marbles() {
+    let g = 9.81;
+    // A rising floor.
+    let mut sim = Simulation::from_scene(&resting_on_floor()).unwrap();
+    for _ in 0..33 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    let floor = sim.boards()[0];
+    let y0 = sim.marble_state(0).0.y;
+    sim.world_mut().get_mut::<Velocity>(floor).unwrap().0 = Vec3::new(0.0, 0.2, 0.0);
+    for _ in 0..32 {
+        sim.step();
+        assert!(!asleep(&sim, 0));
+    }
+    let rise = sim.marble_state(0).0.y - y0;
+    assert!((rise - 0.1).abs() < 1e-3, "rose {rise} m");
+
+    // A floor moved away.
+    let mut sim = Simulation::from_scene(&resting_on_floor()).unwrap();
+    sim.world_mut().resource_mut::<StepConfig>().integrator = Integrator::VelocityVerlet;
+    for _ in 0..33 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    let floor = sim.boards()[0];
+    sim.world_mut().get_mut::<Position>(floor).unwrap().0.y -= 1.0;
+    for _ in 0..16 {
+        sim.step();
+    }
+    let fall = y0 - sim.marble_state(0).0.y;
+    let want = 0.5 * g * 0.25 * 0.25;
+    assert!(
+        (fall - want).abs() < 1e-2 * want,
+        "fell {fall} m, want {want}"
+    );
+
+    // Gravity turned upwards.
+    let mut sim = Simulation::from_scene(&resting_on_floor()).unwrap();
+    sim.world_mut().resource_mut::<StepConfig>().integrator = Integrator::VelocityVerlet;
+    for _ in 0..33 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    sim.world_mut().resource_mut::<StepConfig>().gravity = Vec3::new(0.0, g, 0.0);
+    for _ in 0..16 {
+        sim.step();
+    }
+    let lift = sim.marble_state(0).0.y - y0;
+    assert!(
+        (lift - want).abs() < 1e-2 * want,
+        "rose {lift} m, want {want}"
+    );
+}
+
+/// Marbles poured into a box (bench scene (b), 300 marbles) with sleeping on (5 mm/s for
+/// 0.5 s) settle and fall asleep as one pile within 6 s, with overlaps under 5% of the
+/// radius and none out of the box; asleep, the pile stays bit for bit where it is. A
+/// marble then dropped onto it at 1 m/s wakes it before it lands: the pile takes it
+/// (no marble passes through another: overlaps stay under 5% of the radius, and the
+/// dropped marble ends on the pile, above its lowest layer), and everything is asleep
+/// again within 4 s.
+#[test]
+fn a_settled_pile_sleeps_whole_and_wakes_when_hit() {
+    let mut scene = scenes::pour_box(300);
+    scene.sleep_speed = 0.005;
+    scene.sleep_time = 0.5;
+    let half = 0.5 * 2.2 * R * 6.0;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let n = sim.marbles().len();
+    let all_asleep = |sim: &Simulation| (0..sim.marbles().len()).all(|i| asleep(sim, i));
+    let mut steps = 0;
+    while !all_asleep(&sim) {
+        sim.step();
+        steps += 1;
+        assert!(steps <= 360, "not all asleep after 6 s");
+    }
+    let positions = |sim: &Simulation| -> Vec<[f32; 3]> {
+        (0..sim.marbles().len())
+            .map(|i| sim.marble_state(i).0.to_array())
+            .collect()
+    };
+    let deepest = |sim: &Simulation| -> f32 {
+        let x: Vec<Vec3> = (0..sim.marbles().len())
+            .map(|i| sim.marble_state(i).0)
+            .collect();
+        let mut deepest = 0.0f32;
+        for i in 0..x.len() {
+            for j in i + 1..x.len() {
+                deepest = deepest.max(2.0 * R - (x[j] - x[i]).length());
+            }
+        }
+        deepest / R
+    };
+    let outside = |sim: &Simulation| {
+        (0..sim.marbles().len())
+            .filter(|&i| {
+                let x = sim.marble_state(i).0;
+                x.x.abs() > half || x.z.abs() > half || x.y < 0.0
+            })
+            .count()
+    };
+    assert!(deepest(&sim) < 0.05 && outside(&sim) == 0);
+    let settled = positions(&sim);
+    for _ in 0..60 {
+        sim.step();
+    }
+    assert_eq!(positions(&sim), settled, "a sleeping pile moved");
+
+    // Drop a marble onto the middle of the pile.
+    let top = settled.iter().map(|x| x[1]).fold(0.0, f32::max);
+    let drop = sim
+        .world_mut()
+        .spawn((
+            Marble,
+            Position(Vec3::new(0.0, top + 3.0 * R, 0.0)),
+            Velocity(Vec3::new(0.0, -1.0, 0.0)),
+        ))
+        .id();
+    let mut woke = 0;
+    for step in 0..240 {
+        sim.step();
+        if step < 30 {
+            woke = woke.max((0..n).filter(|&i| !asleep(&sim, i)).count());
+        }
+        assert!(deepest_with(&sim, drop) < 0.05, "overlap at step {step}");
+    }
+    assert!(woke > 0, "the drop woke nothing");
+    let y = sim.world().get::<Position>(drop).unwrap().y;
+    assert!(y > 3.0 * R, "the dropped marble sank to {y} m");
+    assert!(all_asleep(&sim), "not asleep again 4 s after the drop");
+    assert!(sim.world().get::<Sleeping>(drop).is_some());
+    assert_eq!(outside(&sim), 0);
+}
+
+/// Deepest overlap (/ r) of marble `m` with any pile marble.
+fn deepest_with(sim: &Simulation, m: bevy_ecs::entity::Entity) -> f32 {
+    let x = sim.world().get::<Position>(m).unwrap().0;
+    (0..sim.marbles().len())
+        .map(|i| 2.0 * R - (sim.marble_state(i).0 - x).length())
+        .fold(0.0, f32::max)
+        / R
+}
