@@ -80,20 +80,6 @@ fn main() {
                 .map(|c| c.depth)
                 .fold(0.0, f32::max);
             let world = sim.world();
-            if std::env::var("DBG").is_ok() {
-                let d: Vec<f32> = sim
-                    .marbles()
-                    .iter()
-                    .filter_map(|&m| world.get::<Drowsy>(m).map(|d| d.0))
-                    .collect();
-                eprintln!(
-                    "drowsy count {} min {:?} max {:?} config {:?}",
-                    d.len(),
-                    d.iter().copied().fold(f32::MAX, f32::min),
-                    d.iter().copied().fold(0.0, f32::max),
-                    world.resource::<StepConfig>().sleep
-                );
-            }
             let asleep = sim
                 .marbles()
                 .iter()
