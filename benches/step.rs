@@ -3,7 +3,8 @@
 //!
 //! The `rolling` group steps 10,000 of them with rolling off and on; the
 //! `marble_collisions` group steps the three bench scenes (a), (b), (c) with marble–marble
-//! collisions on.
+//! collisions on; the `settled_pile` group steps scene (b)'s pile once it has settled,
+//! awake and asleep.
 //!
 //! `cargo bench --bench step`; criterion reports the time per step and, with
 //! `Throughput::Elements(N)`, marble-steps per second (ns per marble-step = 1e9 / that).
@@ -223,11 +224,37 @@ fn fused_loop(c: &mut Criterion) {
     group.finish();
 }
 
+/// Bench scene (b)'s pile once settled: stepped for [`scenes::SETTLE_STEPS`] (6 s)
+/// outside the timing, then timed as it lies, step after step: awake (the scene as
+/// defined, sleeping off) and asleep ([`scenes::pour_box_sleeping`]: the whole pile is
+/// asleep by then). Throughput is marble-steps.
+fn settled_pile(c: &mut Criterion) {
+    let mut group = c.benchmark_group("settled_pile");
+    group.sample_size(10);
+    // 1,000 marbles only: the 10,000-marble pour still has marbles stirring at 5–9 cm/s
+    // after 8 s (README, "Many marbles"), so its one touching group never sleeps.
+    for n in [1_000usize] {
+        for (name, scene) in [
+            ("awake", scenes::pour_box(n)),
+            ("asleep", scenes::pour_box_sleeping(n)),
+        ] {
+            let mut sim = Simulation::from_scene(&scene).expect("bench scene is valid");
+            for _ in 0..scenes::SETTLE_STEPS {
+                sim.step();
+            }
+            group.throughput(Throughput::Elements(n as u64));
+            group.bench_function(BenchmarkId::new(name, n), |b| b.iter(|| sim.step()));
+        }
+    }
+    group.finish();
+}
+
 criterion_group!(
     benches,
     walled_board,
     rolling,
     marble_collisions,
+    settled_pile,
     fused_loop
 );
 criterion_main!(benches);

@@ -143,6 +143,21 @@ pub fn pour_box(n: usize) -> Scene {
     }
 }
 
+/// Steps of [`pour_box`] after which its pile has settled (6 s): the `settled_pile`
+/// benches start timing there.
+pub const SETTLE_STEPS: u64 = 360;
+
+/// [`pour_box`] with sleeping on: marbles slower than 5 mm/s for half a second fall asleep
+/// ([`crate::sleep`]). Every start of the 1,000-marble pour measured is asleep as a whole
+/// by 3 s.
+pub fn pour_box_sleeping(n: usize) -> Scene {
+    Scene {
+        sleep_speed: 0.005,
+        sleep_time: 0.5,
+        ..pour_box(n)
+    }
+}
+
 /// The three bench scenes, shared by the criterion benches, the tests, the rapier
 /// comparison and `marble scene --bench`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

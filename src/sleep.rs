@@ -123,6 +123,20 @@ fn gravity_turns(tilt: Option<&GravityTilt>) -> bool {
     tilt.is_some_and(|t| t.angular_velocity != Vec3::ZERO)
 }
 
+/// A sleeping marble the program has given a velocity, spin or force, or moved.
+fn changed_by_program(
+    sleeping: &Sleeping,
+    position: &Position,
+    velocity: &Velocity,
+    force: &Force,
+    spin: Option<&AngularVelocity>,
+) -> bool {
+    position.0 != sleeping.position
+        || velocity.0 != Vec3::ZERO
+        || force.0 != Vec3::ZERO
+        || spin.is_some_and(|w| w.0 != Vec3::ZERO)
+}
+
 /// First substep of each step, after the boards' snapshot: wakes the sleeping marbles that
 /// something reaches (module docs, "Waking").
 pub fn wake(
@@ -148,6 +162,25 @@ pub fn wake(
     awake: Query<
         (&Position, &Velocity, &Force, &Mass, &Radius),
         (With<Marble>, Without<Sleeping>, Without<Quarantined>),
+    >,
+    changed: Query<
+        (
+            &Sleeping,
+            &Position,
+            &Velocity,
+            &Force,
+            Option<&AngularVelocity>,
+        ),
+        (
+            With<Marble>,
+            Without<Quarantined>,
+            Or<(
+                Changed<Position>,
+                Changed<Velocity>,
+                Changed<Force>,
+                Changed<AngularVelocity>,
+            )>,
+        ),
     >,
 ) {
     let state = state.as_mut();
@@ -186,6 +219,19 @@ pub fn wake(
     if n == 0 {
         return;
     }
+    // The stages never write to a sleeping marble, so only one the program changed since
+    // the last step can have woken by itself; with no board, no gravity and no awake
+    // marble to reach the others, a still world stops here.
+    let reached = gravity_changed
+        || !state.reaching.is_empty()
+        || (config.marble_collisions && !awake.is_empty());
+    if !reached
+        && !changed
+            .iter()
+            .any(|(s, x, v, f, w)| changed_by_program(s, x, v, f, w))
+    {
+        return;
+    }
     // Every sleeping marble, in query order, with what wakes it by itself.
     state.spheres.clear();
     state.entities.clear();
@@ -197,10 +243,7 @@ pub fn wake(
         let k = state.spheres.len() as u32;
         state.spheres.push(x.extend(r));
         state.entities.push(entity);
-        let moved = x != sleeping.position
-            || velocity.0 != Vec3::ZERO
-            || force.0 != Vec3::ZERO
-            || spin.is_some_and(|w| w.0 != Vec3::ZERO);
+        let moved = changed_by_program(sleeping, position, velocity, force, spin);
         let reached = gravity_changed
             || state.reaching.iter().any(|(aabb, sweep)| {
                 aabb.is_none_or(|a| {
@@ -215,7 +258,6 @@ pub fn wake(
             state.queue.push(k);
         }
     }
-    // A still world (everything asleep, nothing woken) stops here.
     if config.marble_collisions && (!awake.is_empty() || !state.queue.is_empty()) {
         // Awake marbles that could reach a sleeping one during the step, and the
         // neighbours of every marble that wakes.

@@ -8,10 +8,11 @@
 
 use std::time::{Duration, Instant};
 
-use bench_rapier::build;
+use bench_rapier::{build, inner_half};
 use bevy_marble::Scene;
-use bevy_marble::scenes::BenchScene;
+use bevy_marble::scenes::{BenchScene, SETTLE_STEPS};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use rapier3d::prelude::RigidBodyActivation;
 
 const STEPS_PER_BUILD: u64 = 60;
 
@@ -57,5 +58,46 @@ fn rapier(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, rapier);
+/// Bench scene (b)'s pile once settled, as bevy_marble's `settled_pile` group times it,
+/// step after step: `awake`, every marble kept awake
+/// (`RigidBodyActivation::cannot_sleep`), stepped for [`SETTLE_STEPS`] (6 s) outside the
+/// timing; and `asleep`, rapier's sleeping on as by default (after 2 s below its
+/// thresholds), stepped for 6 s and on until rapier has put every marble to sleep (at most
+/// 60 s more; on this machine it took until 38 s, the pile stirring at up to a few cm/s
+/// until then). When the pile fell asleep is printed.
+fn settled_pile(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rapier_settled_pile");
+    group.sample_size(10);
+    // 1,000 marbles only, as bevy_marble's group.
+    let n = 1_000usize;
+    let scene = BenchScene::PourBox.build(n);
+    for asleep in [false, true] {
+        let mut world = build(&scene);
+        if !asleep {
+            for &h in &world.marbles.clone() {
+                *world.bodies[h].activation_mut() = RigidBodyActivation::cannot_sleep();
+            }
+        }
+        for _ in 0..SETTLE_STEPS {
+            world.step();
+        }
+        while asleep && world.stats(None).sleeping < n && world.steps() < SETTLE_STEPS + 3600 {
+            world.step();
+        }
+        let stats = world.stats(inner_half(&scene));
+        eprintln!(
+            "rapier, pour box of {n} after {:.2} s: {} asleep, fastest {:.4} m/s, {} outside",
+            world.steps() as f32 * scene.dt,
+            stats.sleeping,
+            stats.max_speed,
+            stats.outside
+        );
+        let name = if asleep { "asleep" } else { "awake" };
+        group.throughput(Throughput::Elements(n as u64));
+        group.bench_function(BenchmarkId::new(name, n), |b| b.iter(|| world.step()));
+    }
+    group.finish();
+}
+
+criterion_group!(benches, rapier, settled_pile);
 criterion_main!(benches);

@@ -109,11 +109,11 @@ impl RapierWorld {
             .first()
             .map(|&h| *self.bodies[h].position())
             .unwrap_or(Pose::IDENTITY);
-        let sleeping = self
-            .marbles
-            .iter()
-            .filter(|&&h| self.bodies[h].is_sleeping())
-            .count();
+        // A body asleep is out of the island manager's active set (rapier 0.36 puts
+        // islands to sleep without setting each body's `is_sleeping` flag).
+        let active: std::collections::HashSet<RigidBodyHandle> =
+            self.islands.active_bodies().collect();
+        let sleeping = self.marbles.iter().filter(|h| !active.contains(h)).count();
         let mut s = Stats::of(
             frame,
             self.marbles.iter().map(|&h| {
