@@ -242,6 +242,13 @@ fn settled_pile(c: &mut Criterion) {
             for _ in 0..scenes::SETTLE_STEPS {
                 sim.step();
             }
+            let world = sim.world();
+            let asleep = sim
+                .marbles()
+                .iter()
+                .filter(|&&m| world.get::<Sleeping>(m).is_some())
+                .count();
+            eprintln!("pour box of {n} after 6 s, {name}: {asleep} asleep");
             group.throughput(Throughput::Elements(n as u64));
             group.bench_function(BenchmarkId::new(name, n), |b| b.iter(|| sim.step()));
         }

@@ -252,7 +252,8 @@ pub struct MarbleContact {
 }
 
 /// The marble–marble contacts of the last substep, in a deterministic order (a resource;
-/// empty unless `marble_collisions` is on).
+/// empty unless `marble_collisions` is on). Sleeping marbles ([`crate::sleep`]) are not
+/// stepped, so their contacts are not listed.
 #[derive(Resource, Default, Debug)]
 pub struct MarbleContacts {
     pub(crate) list: Vec<MarbleContact>,

@@ -16,7 +16,8 @@ pub struct MarbleSubstep;
 /// `.in_set(MarbleSystems::…)` or order them `.before`/`.after` a stage.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum MarbleSystems {
-    /// Snapshot every board's pose and motion for the substep.
+    /// Snapshot every board's pose and motion for the substep; on the first substep, with
+    /// sleeping on, wake the sleeping marbles something reaches ([`crate::sleep`]).
     PrepareBoards,
     /// Gravity plus user forces → acceleration.
     AccumulateForces,
@@ -33,7 +34,8 @@ pub enum MarbleSystems {
     CollideMarbles,
     /// Kinematic boards advance.
     MoveBoards,
-    /// Last substep only: clear forces, quarantine non-finite marbles.
+    /// Last substep only: clear forces, quarantine non-finite marbles, and with sleeping on
+    /// put to sleep the groups that have been slow long enough ([`crate::sleep`]).
     Finish,
 }
 

@@ -5,7 +5,7 @@
 //!
 //! | stage | file | does |
 //! | --- | --- | --- |
-//! | `PrepareBoards` | `boards.rs` | snapshots every board's pose and motion for the substep |
+//! | `PrepareBoards` | `boards.rs`, `src/sleep.rs` | snapshots every board's pose and motion for the substep; on the first substep, with sleeping on, wakes the sleeping marbles something reaches |
 //! | `AccumulateForces` | `forces.rs` | acceleration = gravity + force / mass |
 //! | `MarbleContacts` | `collide.rs` | touching marble pairs: collisions at the start, friction, contact forces, overlap (only with `marble_collisions`) |
 //! | `Integrate` | `integrate.rs` | free motion over the substep with the chosen integrator |
@@ -13,7 +13,7 @@
 //! | `Respond` | `respond.rs` | impacts and contacts of the marbles detection flagged |
 //! | `CollideMarbles` | `collide.rs` | marble pairs that meet inside the substep collide at their time of impact (only with `marble_collisions`) |
 //! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities |
-//! | `Finish` | `forces.rs` | on the last substep: clear forces, quarantine non-finite marbles |
+//! | `Finish` | `forces.rs`, `src/sleep.rs` | on the last substep: clear forces, quarantine non-finite marbles; with sleeping on, put to sleep the groups that have been slow long enough |
 
 /// With the `parallel` feature, queries of fewer marbles than this run in order: handing
 /// a few marbles to the task pool costs more than their work (a study of thousands of
