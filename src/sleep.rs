@@ -141,9 +141,7 @@ fn changed_by_program(
 /// something reaches (module docs, "Waking").
 pub fn wake(
     mut commands: Commands,
-    config: Res<StepConfig>,
-    tilt: Option<Res<GravityTilt>>,
-    cache: Res<BoardCache>,
+    (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
     mut state: ResMut<SleepState>,
     mut sleepers: Query<
         (
