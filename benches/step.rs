@@ -249,6 +249,8 @@ fn settled_pile(c: &mut Criterion) {
                 .filter(|&&m| world.get::<Sleeping>(m).is_some())
                 .count();
             eprintln!("pour box of {n} after 6 s, {name}: {asleep} asleep");
+            // The two benches time what they say: an awake pile, and one wholly asleep.
+            assert_eq!(asleep, if name == "asleep" { n } else { 0 });
             group.throughput(Throughput::Elements(n as u64));
             group.bench_function(BenchmarkId::new(name, n), |b| b.iter(|| sim.step()));
         }

@@ -16,8 +16,8 @@ pub struct MarbleSubstep;
 /// `.in_set(MarbleSystems::…)` or order them `.before`/`.after` a stage.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum MarbleSystems {
-    /// Snapshot every board's pose and motion for the substep; on the first substep, with
-    /// sleeping on, wake the sleeping marbles something reaches ([`crate::sleep`]).
+    /// Snapshot every board's pose and motion for the substep; on the first substep, wake
+    /// the sleeping marbles something reaches ([`crate::sleep`]).
     PrepareBoards,
     /// Gravity plus user forces → acceleration.
     AccumulateForces,
@@ -34,8 +34,8 @@ pub enum MarbleSystems {
     CollideMarbles,
     /// Kinematic boards advance.
     MoveBoards,
-    /// Last substep only: clear forces, quarantine non-finite marbles, and with sleeping on
-    /// put to sleep the groups that have been slow long enough ([`crate::sleep`]).
+    /// Last substep only: with sleeping on, put to sleep the groups that have been slow
+    /// long enough ([`crate::sleep`]); clear forces, quarantine non-finite marbles.
     Finish,
 }
 
@@ -69,9 +69,7 @@ pub fn substep_schedule() -> Schedule {
     schedule.add_systems((
         (
             boards::prepare_boards,
-            sleep::wake
-                .run_if(sleep::sleep_on)
-                .run_if(sleep::first_substep),
+            sleep::wake.run_if(sleep::first_substep),
         )
             .chain()
             .in_set(MarbleSystems::PrepareBoards),
@@ -99,9 +97,9 @@ pub fn substep_schedule() -> Schedule {
             .chain()
             .in_set(MarbleSystems::MoveBoards),
         (
+            sleep::fall_asleep.run_if(sleep::sleep_on),
             forces::clear_forces,
             forces::quarantine_non_finite,
-            sleep::fall_asleep.run_if(sleep::sleep_on),
         )
             .chain()
             .in_set(MarbleSystems::Finish)

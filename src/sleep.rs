@@ -3,40 +3,49 @@
 //! default).
 //!
 //! # Falling asleep
-//! At the end of each step ([`fall_asleep`]) every awake marble that is slow (speed, and
-//! spin times radius when it spins, below [`Sleep::speed`]), pushed by no user force and
-//! touching no moving board adds the step to its [`Drowsy`] time; any other marble starts
-//! again from zero. With `marble_collisions` on, the marbles are grouped (union–find) by
-//! the relation that wakes them, below: two marbles are in one group when either could
-//! reach the other during the next step. A group sleeps when every one of its marbles has
-//! been slow for [`Sleep::time`]: each gets [`Sleeping`], its velocity and spin are set to
+//! At the end of each step, before the forces are cleared ([`fall_asleep`]), every awake
+//! marble that is slow (speed, and spin times radius when it spins, below
+//! [`Sleep::speed`]), pushed by no program force, touching no moving board and out of
+//! reach of every moving board (below) adds the step to its [`Drowsy`] time; any other
+//! marble starts again from zero. Nothing is slow while gravity turns ([`GravityTilt`]
+//! with an angular velocity). With `marble_collisions` on, the marbles are grouped
+//! (union–find) by the relation that wakes them, below: two marbles are in one group when
+//! either could reach the other during the next step. A group sleeps when every one of its
+//! marbles has been slow for [`Sleep::time`] (within half a step: the sum of f32 steps may
+//! fall short by a rounding): each gets [`Sleeping`], its velocity and spin are set to
 //! zero, and every stage skips it (as it skips [`Quarantined`] marbles). A pile therefore
-//! sleeps as a whole, never a marble under a neighbour that is still settling onto it, and
-//! no awake marble is within reach of a group that falls asleep. Without marble
-//! collisions each marble is its own group. Nothing sleeps while gravity turns
-//! ([`GravityTilt`] with an angular velocity).
+//! sleeps as a whole, never a marble under a neighbour still settling onto it, and no
+//! awake marble is within reach of a group that falls asleep. Without marble collisions
+//! each marble is its own group.
 //!
 //! # Waking
 //! At the start of each step ([`wake`]) a sleeping marble wakes when
-//! - its velocity, spin or force is no longer zero, or its position is not where it fell
-//!   asleep (a program moved it);
-//! - a board that moves, turns, was moved, or was added, removed or reshaped since the last
-//!   step comes within a radius of it (the board's bounds swept over the step);
-//! - gravity changed;
+//! - the program gave it a velocity, spin or force, moved it or changed its radius (or
+//!   removed its [`Sleeping`]);
+//! - a board that moves or turns, or was moved, added, removed or reshaped since the last
+//!   step, comes within a radius of it (the board's bounds swept over the substep, grown by
+//!   how far it moves in the rest of the step; for a moved board also where it was);
+//! - gravity changed, or turns;
 //! - with `marble_collisions` on, an awake marble, or one that wakes, could reach it during
-//!   the step: the marble's *reach*, its radius plus everywhere its free path can take it
-//!   in one step (`|v| dt + ½|a| dt²`) plus one more radius for the knocks of collisions,
-//!   meets it. Waking therefore spreads through a sleeping group.
+//!   the step. A marble's *reach* is its radius, plus one more radius, plus everywhere its
+//!   free path can take it in one step at its speed raised by the fastest *knock* a
+//!   collision could give it this step: twice the fastest awake or waking marble's speed
+//!   plus the fastest board surface's (a marble struck by a heavier one leaves at up to
+//!   `(1 + e)` times the striker's speed). Waking therefore spreads through a group.
+//! - sleeping is turned off: every sleeping marble wakes.
 //!
-//! A woken marble starts from rest and its [`Drowsy`] time from zero. The contact solver's
-//! warm start is not kept over sleep: a woken pile's impulses build up again over the first
-//! substeps, as when it first settled.
+//! A woken marble keeps the velocity the program gave it (zero otherwise) and starts its
+//! [`Drowsy`] time from zero; when a board moved, came or went, its board contacts from
+//! before are dropped. The contact solver's warm start is not kept over sleep: a woken
+//! pile's impulses build up again over the first substeps, as when it first settled.
 //!
-//! What sleeping costs in accuracy: a marble slower than the threshold is stopped. A
-//! marble creeping at less than [`Sleep::speed`] for [`Sleep::time`] (a very slow roll on
-//! a level board, the last settling of a pile) stops where it is; one above it never
-//! sleeps. The tests in `tests/sleep.rs` check when marbles fall asleep, that a settled
-//! pile asleep stays bit for bit where it is, and each way of waking.
+//! What sleeping costs in accuracy: a marble slower than the threshold for [`Sleep::time`]
+//! (a very slow roll on a level board, the last settling of a pile) stops where it is; one
+//! above it never sleeps. A knock larger than the bound above (a chain of ever lighter
+//! marbles, each struck by a heavier one) could still carry a marble into a sleeping one
+//! within a step; it is then woken at the next step, overlapping, and the contact stage
+//! pushes the two apart. The tests in `tests/sleep.rs` check when marbles fall asleep,
+//! that a settled pile asleep stays bit for bit where it is, and each way of waking.
 
 use bevy_ecs::prelude::*;
 use glam::{Vec3, Vec4};
@@ -46,7 +55,7 @@ use crate::components::{
     AngularVelocity, Contacts, Force, Marble, Mass, Position, Quarantined, Radius, Velocity,
 };
 use crate::config::{GravityTilt, Sleep, StepConfig, SubstepCounter};
-use crate::narrow::BoardCache;
+use crate::narrow::{BoardCache, BoardSnapshot};
 use crate::pairs::Grid;
 
 /// A marble asleep: every stage skips it until something wakes it (module docs). Remove
@@ -55,6 +64,8 @@ use crate::pairs::Grid;
 pub struct Sleeping {
     /// Where the marble fell asleep: moved elsewhere, it wakes.
     position: Vec3,
+    /// Its radius then: given another, it wakes.
+    radius: f32,
 }
 
 impl Sleeping {
@@ -70,25 +81,55 @@ impl Sleeping {
 pub struct Drowsy(pub f32);
 
 /// How far from its centre a marble could reach during a step of `dt` (module docs): its
-/// radius, its free path's farthest point and one more radius.
+/// radius, one more radius, and its free path's farthest point at its speed `v` raised by
+/// the fastest knock `knock` a collision could give it.
 #[inline]
-fn reach(r: f32, v: Vec3, a: Vec3, dt: f32) -> f32 {
-    2.0 * r + v.length() * dt + 0.5 * a.length() * dt * dt
+fn reach(r: f32, v: Vec3, a: Vec3, knock: f32, dt: f32) -> f32 {
+    2.0 * r + (v.length() + knock) * dt + 0.5 * a.length() * dt * dt
+}
+
+/// The fastest knock a collision could give a marble this step: twice the fastest awake
+/// marble's speed `fastest` plus the fastest board surface (module docs).
+fn knock(fastest: f32, boards: &[BoardSnapshot]) -> f32 {
+    let board = boards
+        .iter()
+        .map(|b| {
+            // A turning plane (unbounded) wakes every marble anyway.
+            let turn = b.angular_velocity.length() * b.reach;
+            b.velocity.length() + if turn.is_finite() { turn } else { 0.0 }
+        })
+        .fold(0.0f32, f32::max);
+    2.0 * (fastest + board)
+}
+
+/// Whether one of the boards that reach marbles this step (`reaching`: swept bounds,
+/// `None` for unbounded, and the distance they move on) comes within a radius of a marble
+/// of radius `r` at `x`.
+fn reached_by_board(reaching: &[(Option<Aabb>, f32)], x: Vec3, r: f32) -> bool {
+    reaching.iter().any(|(aabb, sweep)| {
+        aabb.is_none_or(|a| {
+            let margin = Vec3::splat(sweep + 2.0 * r);
+            let (lo, hi) = (a.mins - margin, a.maxs + margin);
+            x.cmpge(lo).all() && x.cmple(hi).all()
+        })
+    })
 }
 
 /// The sleep stages' state (a resource): the sleeping marbles' spheres in a grid, what
 /// the boards and gravity were at the last step, and reusable buffers.
 #[derive(Resource, Default, Debug)]
 pub struct SleepState {
-    /// The sleeping marbles' spheres (centre, radius) and entities, when `fresh`.
+    /// The sleeping marbles' spheres (centre, radius) and entities.
     spheres: Vec<Vec4>,
     entities: Vec<Entity>,
     grid: Grid,
-    /// Boards that reach marbles this step: swept bounds (`None`: unbounded) and margin.
+    /// Boards that reach marbles this step: swept bounds (`None`: unbounded) and the
+    /// distance they move on over the rest of the step; and of those, the boards that move.
     reaching: Vec<(Option<Aabb>, f32)>,
+    moving: Vec<(Option<Aabb>, f32)>,
     /// Gravity as the marbles saw it at the last step.
     gravity: Option<Vec3>,
-    /// The board cache's epoch and each board's pose version at the last step.
+    /// The board cache's epoch at the last step.
     epoch: u32,
     /// Each board's entity, pose version and swept bounds at the last step.
     poses: Vec<(Entity, u32, Option<Aabb>)>,
@@ -123,50 +164,55 @@ fn gravity_turns(tilt: Option<&GravityTilt>) -> bool {
     tilt.is_some_and(|t| t.angular_velocity != Vec3::ZERO)
 }
 
-/// A sleeping marble the program has given a velocity, spin or force, or moved.
+/// A sleeping marble the program has given a velocity, spin or force, moved or resized.
 fn changed_by_program(
     sleeping: &Sleeping,
-    position: &Position,
-    velocity: &Velocity,
-    force: &Force,
+    (position, velocity, force, radius): (&Position, &Velocity, &Force, &Radius),
     spin: Option<&AngularVelocity>,
 ) -> bool {
     position.0 != sleeping.position
+        || radius.0 != sleeping.radius
         || velocity.0 != Vec3::ZERO
         || force.0 != Vec3::ZERO
         || spin.is_some_and(|w| w.0 != Vec3::ZERO)
 }
 
 /// First substep of each step, after the boards' snapshot: wakes the sleeping marbles that
-/// something reaches (module docs, "Waking").
+/// something reaches (module docs, "Waking"); with sleeping off, wakes every sleeping
+/// marble. Runs with sleeping off too, so that marbles asleep when it was turned off
+/// wake; it stops at once when none sleeps.
 pub fn wake(
     mut commands: Commands,
     (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
     mut state: ResMut<SleepState>,
+    mut removed: RemovedComponents<Sleeping>,
     mut sleepers: Query<
         (
             Entity,
             &Sleeping,
-            &Position,
-            &Velocity,
-            &Force,
+            (&Position, &Velocity, &Force, &Radius),
             &Mass,
-            &Radius,
+            &mut Contacts,
             Option<&AngularVelocity>,
             Option<&mut Drowsy>,
         ),
         (With<Marble>, Without<Quarantined>),
     >,
-    awake: Query<
-        (&Position, &Velocity, &Force, &Mass, &Radius),
+    mut awake: Query<
+        (
+            &Position,
+            &Velocity,
+            &Force,
+            &Mass,
+            &Radius,
+            Option<&mut Drowsy>,
+        ),
         (With<Marble>, Without<Sleeping>, Without<Quarantined>),
     >,
     changed: Query<
         (
             &Sleeping,
-            &Position,
-            &Velocity,
-            &Force,
+            (&Position, &Velocity, &Force, &Radius),
             Option<&AngularVelocity>,
         ),
         (
@@ -176,21 +222,43 @@ pub fn wake(
                 Changed<Position>,
                 Changed<Velocity>,
                 Changed<Force>,
+                Changed<Radius>,
                 Changed<AngularVelocity>,
             )>,
         ),
     >,
 ) {
+    // A marble whose `Sleeping` went (woken here last step, or by the program) starts its
+    // slow time again.
+    for entity in removed.read() {
+        if let Ok((.., Some(mut drowsy))) = awake.get_mut(entity) {
+            drowsy.0 = 0.0;
+        }
+    }
     let state = state.as_mut();
+    if config.sleep.is_none() {
+        state.gravity = None;
+        state.poses.clear();
+        for (entity, .., drowsy) in &mut sleepers {
+            commands.entity(entity).remove::<Sleeping>();
+            if let Some(mut drowsy) = drowsy {
+                drowsy.0 = 0.0;
+            }
+        }
+        return;
+    }
     let g = seen_gravity(&config, tilt.as_deref());
-    let gravity_changed = state.gravity.is_some_and(|old| old != g);
+    let gravity_changed =
+        state.gravity.is_some_and(|old| old != g) || gravity_turns(tilt.as_deref());
     state.gravity = Some(g);
     // Boards that move, turn, or were moved since the last step: their swept bounds, and
     // where a moved board was (`None`: unbounded, it reaches everything). A board added,
     // removed or reshaped reaches everything.
     let dt = config.dt;
     state.reaching.clear();
-    if cache.epoch != state.epoch {
+    state.moving.clear();
+    let mut rearranged = cache.epoch != state.epoch;
+    if rearranged {
         state.reaching.push((None, 0.0));
     }
     for b in &cache.boards {
@@ -200,9 +268,13 @@ pub fn wake(
             // The snapshot sweeps one substep; the board moves on for the rest of the step.
             let sweep = (b.velocity.length() + b.angular_velocity.length() * b.reach) * dt;
             state.reaching.push((b.swept_aabb, sweep));
+            if b.is_moving() {
+                state.moving.push((b.swept_aabb, sweep));
+            }
         }
         if let Some(&(_, _, before)) = last.filter(|_| moved) {
             state.reaching.push((before, 0.0));
+            rearranged = true;
         }
     }
     state.epoch = cache.epoch;
@@ -226,7 +298,7 @@ pub fn wake(
     if !reached
         && !changed
             .iter()
-            .any(|(s, x, v, f, w)| changed_by_program(s, x, v, f, w))
+            .any(|(sleeping, state, spin)| changed_by_program(sleeping, state, spin))
     {
         return;
     }
@@ -235,36 +307,34 @@ pub fn wake(
     state.entities.clear();
     state.woken.clear();
     state.queue.clear();
-    for (entity, sleeping, position, velocity, force, _, radius, spin, _) in &sleepers {
-        let x = position.0;
-        let r = radius.0;
+    let mut fastest = 0.0f32;
+    for (entity, sleeping, marble, _, _, spin, _) in &sleepers {
+        let (position, velocity, _, radius) = marble;
         let k = state.spheres.len() as u32;
-        state.spheres.push(x.extend(r));
+        state.spheres.push(position.0.extend(radius.0));
         state.entities.push(entity);
-        let moved = changed_by_program(sleeping, position, velocity, force, spin);
-        let reached = gravity_changed
-            || state.reaching.iter().any(|(aabb, sweep)| {
-                aabb.is_none_or(|a| {
-                    let margin = Vec3::splat(sweep + 2.0 * r);
-                    let (lo, hi) = (a.mins - margin, a.maxs + margin);
-                    x.cmpge(lo).all() && x.cmple(hi).all()
-                })
-            });
-        let wakes = moved || reached;
+        let wakes = gravity_changed
+            || changed_by_program(sleeping, marble, spin)
+            || reached_by_board(&state.reaching, position.0, radius.0);
         state.woken.push(wakes);
         if wakes {
             state.queue.push(k);
+            fastest = fastest.max(velocity.0.length());
         }
     }
     if config.marble_collisions && (!awake.is_empty() || !state.queue.is_empty()) {
-        // Awake marbles that could reach a sleeping one during the step, and the
-        // neighbours of every marble that wakes.
+        // Awake marbles that could reach a sleeping one during the step, and the marbles
+        // within reach of every marble that wakes.
+        for (_, velocity, ..) in &awake {
+            fastest = fastest.max(velocity.0.length());
+        }
+        let knock = knock(fastest, &cache.boards);
         state.grid.reserve(n);
         let (grid, spheres) = (&mut state.grid, &state.spheres);
         grid.build(spheres);
-        for (position, velocity, force, mass, radius) in &awake {
+        for (position, velocity, force, mass, radius, _) in &awake {
             let a = g + force.0 * mass.inverse();
-            let probe = position.0.extend(reach(radius.0, velocity.0, a, dt));
+            let probe = position.0.extend(reach(radius.0, velocity.0, a, knock, dt));
             grid.query(spheres, probe, |k| {
                 if !state.woken[k as usize] {
                     state.woken[k as usize] = true;
@@ -272,18 +342,19 @@ pub fn wake(
                 }
             });
         }
-        // A marble that wakes starts from rest.
         let mut head = 0;
         while head < state.queue.len() {
             let k = state.queue[head] as usize;
             head += 1;
-            let Ok((.., force, mass, radius, _, _)) = sleepers.get(state.entities[k]) else {
+            let Ok((_, _, (_, velocity, force, radius), mass, ..)) =
+                sleepers.get(state.entities[k])
+            else {
                 continue;
             };
             let a = g + force.0 * mass.inverse();
             let probe = spheres[k]
                 .truncate()
-                .extend(reach(radius.0, Vec3::ZERO, a, dt));
+                .extend(reach(radius.0, velocity.0, a, knock, dt));
             grid.query(spheres, probe, |k| {
                 if !state.woken[k as usize] {
                     state.woken[k as usize] = true;
@@ -292,35 +363,32 @@ pub fn wake(
             });
         }
     }
-    if state.queue.is_empty() {
-        return;
-    }
     for &k in &state.queue {
         let entity = state.entities[k as usize];
         commands.entity(entity).remove::<Sleeping>();
-        if let Ok((.., Some(mut drowsy))) = sleepers.get_mut(entity) {
-            drowsy.0 = 0.0;
+        if let Ok((.., mut contacts, _, drowsy)) = sleepers.get_mut(entity) {
+            if let Some(mut drowsy) = drowsy {
+                drowsy.0 = 0.0;
+            }
+            // Contacts kept from before a board moved, came or went may be gone.
+            if rearranged {
+                contacts.clear();
+            }
         }
     }
 }
 
-/// Last substep of each step, after the quarantine: adds the step to each slow marble's
-/// [`Drowsy`] time and puts to sleep every touching group whose marbles have all been slow
+/// Last substep of each step, before the forces are cleared: adds the step to each slow
+/// marble's [`Drowsy`] time and puts to sleep every group whose marbles have all been slow
 /// for [`Sleep::time`] (module docs, "Falling asleep").
 pub fn fall_asleep(
     mut commands: Commands,
-    config: Res<StepConfig>,
-    tilt: Option<Res<GravityTilt>>,
-    cache: Res<BoardCache>,
+    (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
     mut state: ResMut<SleepState>,
     mut marbles: Query<
         (
             Entity,
-            &Position,
-            &mut Velocity,
-            &Force,
-            &Mass,
-            &Radius,
+            (&Position, &mut Velocity, &Force, &Mass, &Radius),
             &Contacts,
             Option<&mut AngularVelocity>,
             Option<&mut Drowsy>,
@@ -331,20 +399,16 @@ pub fn fall_asleep(
     let Some(Sleep { speed, time }) = config.sleep else {
         return;
     };
-    if gravity_turns(tilt.as_deref()) {
-        return;
-    }
     let state = state.as_mut();
     let dt = config.dt;
     let g = seen_gravity(&config, tilt.as_deref());
+    // Nothing is slow while gravity turns.
+    let turning = gravity_turns(tilt.as_deref());
     let mut any = false;
+    let mut fastest = 0.0f32;
     state.ready.clear();
-    state.bounds.clear();
-    for (entity, position, velocity, force, mass, radius, contacts, spin, drowsy) in &mut marbles {
-        let a = g + force.0 * mass.inverse();
-        state
-            .bounds
-            .push(position.0.extend(reach(radius.0, velocity.0, a, dt)));
+    for (entity, (position, velocity, force, _, radius), contacts, spin, drowsy) in &mut marbles {
+        fastest = fastest.max(velocity.0.length());
         let spin_speed = spin.as_ref().map_or(0.0, |w| w.0.length() * radius.0);
         let on_moving_board = contacts.iter().any(|c| {
             cache
@@ -352,10 +416,13 @@ pub fn fall_asleep(
                 .get(c.piece.board())
                 .is_some_and(|b| b.is_moving())
         });
-        let slow = velocity.0.length() < speed
+        let slow = !turning
+            && velocity.0.length() < speed
             && spin_speed < speed
             && force.0 == Vec3::ZERO
-            && !on_moving_board;
+            && !on_moving_board
+            // A moving board that would wake it next step.
+            && !reached_by_board(&state.moving, position.0, radius.0);
         let t = match drowsy {
             Some(mut d) => {
                 d.0 = if slow { d.0 + dt } else { 0.0 };
@@ -367,7 +434,9 @@ pub fn fall_asleep(
                 t
             }
         };
-        let ready = t >= time;
+        // Within half a step of `time`: the sum of f32 steps may fall short of it by a
+        // rounding.
+        let ready = t >= time - 0.5 * dt;
         any |= ready;
         state.ready.push(ready);
     }
@@ -375,6 +444,14 @@ pub fn fall_asleep(
         return;
     }
     // Groups: union–find over the pairs within each other's reach.
+    let knock = knock(fastest, &cache.boards);
+    state.bounds.clear();
+    for (_, (position, velocity, force, mass, radius), ..) in &marbles {
+        let a = g + force.0 * mass.inverse();
+        state
+            .bounds
+            .push(position.0.extend(reach(radius.0, velocity.0, a, knock, dt)));
+    }
     let n = state.bounds.len();
     state.parent.clear();
     state.parent.extend(0..n as u32);
@@ -407,7 +484,9 @@ pub fn fall_asleep(
             state.group_ready[r as usize] = false;
         }
     }
-    for (k, (entity, position, mut velocity, .., spin, _)) in marbles.iter_mut().enumerate() {
+    for (k, (entity, (position, mut velocity, _, _, radius), _, spin, _)) in
+        marbles.iter_mut().enumerate()
+    {
         let r = root(&mut state.parent, k as u32);
         if !(state.ready[k] && state.group_ready[r as usize]) {
             continue;
@@ -418,6 +497,7 @@ pub fn fall_asleep(
         }
         commands.entity(entity).insert(Sleeping {
             position: position.0,
+            radius: radius.0,
         });
     }
 }

@@ -35,7 +35,8 @@ static GLOBAL: Counting = Counting;
 
 /// Once warmed up, stepping allocates nothing: 100 steps of 1,000 marbles on the walled
 /// board (contacts, walls, CCD), of the tilting labyrinth scene (marbles colliding with
-/// each other) and of 1,000 marbles poured into a box (the pile solver).
+/// each other) and of 1,000 marbles poured into a box (the pile solver); and a pile
+/// asleep.
 #[test]
 fn stepping_does_not_allocate() {
     for scene in [
@@ -59,4 +60,37 @@ fn stepping_does_not_allocate() {
             scene.marbles.len()
         );
     }
+    a_sleeping_pile_does_not_allocate();
+}
+
+/// A pile asleep allocates nothing either: bench scene (b) with sleeping on
+/// (`scenes::pour_box_sleeping`, 300 marbles), stepped until every marble sleeps, then
+/// 100 steps. (Called from [`stepping_does_not_allocate`]: the allocation count is
+/// global, so the two must not run at once.)
+fn a_sleeping_pile_does_not_allocate() {
+    use bevy_marble::prelude::Sleeping;
+    let scene = scenes::pour_box_sleeping(300);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let all_asleep = |sim: &Simulation| {
+        sim.marbles()
+            .iter()
+            .all(|&m| sim.world().get::<Sleeping>(m).is_some())
+    };
+    let mut steps = 0;
+    while !all_asleep(&sim) {
+        sim.step();
+        steps += 1;
+        assert!(steps <= 360, "not all asleep after 6 s");
+    }
+    sim.step();
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    for _ in 0..100 {
+        sim.step();
+    }
+    let after = ALLOCATIONS.load(Ordering::Relaxed);
+    assert_eq!(
+        after - before,
+        0,
+        "allocations during 100 steps of a sleeping pile"
+    );
 }

@@ -59,6 +59,51 @@ fn parallel_feature_is_bit_identical() {
     );
 }
 
+/// Sleeping with the `parallel` feature gives the same bits as without: bench scene (a)
+/// with 1,100 marbles (enough for the per-marble stages to go parallel), marble collisions
+/// on and a lax threshold (5 cm/s for 0.1 s), so that the board's marbles fall asleep as
+/// one group and are woken through it when the program sends one marble into its
+/// neighbour; pinned (every step's hash folded in) like the hash above and checked by CI
+/// in both builds.
+#[test]
+fn parallel_sleeping_is_bit_identical() {
+    const PINNED: u64 = 0xd808_9d18_6c34_3b35;
+    let mut scene = scenes::walled_board(1100);
+    scene.marble_collisions = true;
+    scene.sleep_speed = 0.05;
+    scene.sleep_time = 0.1;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let (mut slept, mut woke, mut before) = (0usize, 0usize, 0usize);
+    let mut h = 0u64;
+    for step in 0..60 {
+        if step == 20 {
+            let m = sim.marbles()[0];
+            sim.world_mut().get_mut::<Velocity>(m).unwrap().0 = Vec3::new(0.3, 0.0, 0.0);
+        }
+        sim.step();
+        let world = sim.world();
+        let asleep = sim
+            .marbles()
+            .iter()
+            .filter(|&&m| world.get::<Sleeping>(m).is_some())
+            .count();
+        slept += asleep.saturating_sub(before);
+        woke += before.saturating_sub(asleep);
+        before = asleep;
+        h = h.rotate_left(17) ^ state_hash(&sim);
+    }
+    assert!(
+        slept >= 1000 && woke >= 1000,
+        "{slept} fell asleep, {woke} woke"
+    );
+    assert_eq!(
+        h,
+        PINNED,
+        "state hash {h:#x} (parallel: {})",
+        cfg!(feature = "parallel")
+    );
+}
+
 /// A hash of every marble's position and velocity bits after 600 steps of the default
 /// scene: identical across runs, and equal to the value pinned here. If a deliberate
 /// change to the physics moves it, run this test, check the change is intended, and

@@ -135,7 +135,8 @@ fn a_sleeping_marble_is_woken_before_a_marble_hits_it() {
 
 /// A program that gives a sleeping marble a velocity or a force, or moves it, wakes it,
 /// and it then moves exactly as an awake marble would: at the velocity, `x = x₀ + v t`;
-/// under the force (Verlet, no gravity), `x = x₀ + ½ (F/m) t²` over the step.
+/// under the force (Verlet, no gravity), `x = x₀ + ½ (F/m) t²` over the step. Sleeping
+/// turned off wakes every sleeping marble.
 #[test]
 fn a_program_that_changes_a_sleeping_marble_wakes_it() {
     let mut scene = space();
@@ -191,6 +192,146 @@ fn a_program_that_changes_a_sleeping_marble_wakes_it() {
     // motion.)
     let got = sim.marble_state(0).0;
     assert!((got - Vec3::new(0.5, 0.0, 0.0)).length() < 1e-6, "{got}");
+
+    // Sleeping turned off.
+    for _ in 0..40 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    sim.world_mut().resource_mut::<StepConfig>().sleep = None;
+    for _ in 0..40 {
+        sim.step();
+        assert!(!asleep(&sim, 0));
+    }
+}
+
+/// A cue marble asleep 10 cm from a sleeping target, given 5 m/s towards it by the
+/// program: the target wakes before the cue reaches it (the cue's reach counts the speed
+/// it was given), and the impact gives the two-body answer (equal masses, e = 0.5:
+/// `1.25` and `3.75` m/s) within 0.5%.
+#[test]
+fn a_marble_woken_with_a_velocity_wakes_what_it_will_reach() {
+    let mut scene = space();
+    let mut cue = MarbleDesc::at([0.0, 0.0, 0.0]);
+    cue.restitution = 0.5;
+    let mut target = MarbleDesc::at([0.1, 0.0, 0.0]);
+    target.restitution = 0.5;
+    scene.marbles = vec![cue, target];
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..33 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0) && asleep(&sim, 1));
+    let m = sim.marbles()[0];
+    sim.world_mut().get_mut::<Velocity>(m).unwrap().0 = Vec3::new(5.0, 0.0, 0.0);
+    for _ in 0..4 {
+        sim.step();
+    }
+    let (v1, v2) = (sim.marble_state(0).1.x, sim.marble_state(1).1.x);
+    assert!(
+        (v1 - 1.25).abs() < 0.025 && (v2 - 3.75).abs() < 0.025,
+        "after the impact {v1}, {v2}; want 1.25, 3.75"
+    );
+}
+
+/// A knock carries a marble farther than its own speed would: a heavy marble (1,000
+/// times the mass) at 1 m/s hits a light one resting 2 r from a sleeping third, which
+/// the light one, leaving at about 2 m/s (`(1 + e)` times, e = 1), reaches within the
+/// step. The sleeping marble is woken in time (its reach counts the fastest knock of the
+/// step): the light marbles never overlap by more than 5% of r, and the third leaves at
+/// more than 1.9 m/s.
+#[test]
+fn a_marble_knocked_by_a_collision_does_not_pass_through_a_sleeping_one() {
+    let mut scene = space();
+    let ball = |x: f32, mass: f32| {
+        let mut m = MarbleDesc::at([x, 0.0, 0.0]);
+        m.restitution = 1.0;
+        m.mass = Some(mass);
+        m
+    };
+    let light = 5e-3;
+    // The third marble first, alone, so that it falls asleep.
+    scene.marbles = vec![ball(0.0, light)];
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..33 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    let spawn = |sim: &mut Simulation, x: f32, v: f32, mass: f32| {
+        sim.world_mut()
+            .spawn((
+                Marble,
+                Position(Vec3::new(x, 0.0, 0.0)),
+                Velocity(Vec3::new(v, 0.0, 0.0)),
+                Mass::new(mass),
+                Restitution(1.0),
+            ))
+            .id()
+    };
+    // The light marble 2 r short of the sleeping one (centres 4 r apart), the heavy one
+    // just short of the light one, closing at 1 m/s.
+    let second = spawn(&mut sim, -4.0 * R, 0.0, light);
+    spawn(&mut sim, -6.0 * R - 1e-3, 1.0, 1000.0 * light);
+    for step in 0..6 {
+        sim.step();
+        let a = sim.world().get::<Position>(second).unwrap().0;
+        let b = sim.marble_state(0).0;
+        let overlap = (2.0 * R - (b - a).length()) / R;
+        assert!(overlap < 0.05, "step {step}: overlap {overlap} r");
+    }
+    assert!(!asleep(&sim, 0));
+    let v = sim.marble_state(0).1.x;
+    assert!(v > 1.9, "the third marble left at {v} m/s");
+}
+
+/// A marble under a weak, steady program force (0.004 m/s², below what `sleep_speed` /
+/// `sleep_time` would notice) never sleeps and moves as the exact answer says: `½ a t²`
+/// after 2 s (Verlet), within 0.5%.
+#[test]
+fn a_marble_under_a_steady_force_never_sleeps() {
+    let mut scene = resting_on_floor();
+    scene.integrator = Integrator::VelocityVerlet;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let m = sim.marbles()[0];
+    let mass = 1.0 / sim.world().get::<Mass>(m).unwrap().inverse();
+    let a = 0.004;
+    let x0 = sim.marble_state(0).0;
+    for _ in 0..128 {
+        sim.world_mut().get_mut::<Force>(m).unwrap().0 = Vec3::new(mass * a, 0.0, 0.0);
+        sim.step();
+        assert!(!asleep(&sim, 0));
+    }
+    let moved = sim.marble_state(0).0.x - x0.x;
+    let want = 0.5 * a * 2.0 * 2.0;
+    assert!(
+        (moved - want).abs() < 5e-3 * want,
+        "moved {moved} m, want {want}"
+    );
+}
+
+/// A marble resting on a still floor 5 mm from a paddle (a second board) that slides away
+/// at 1 mm/s: within a radius of the paddle's bounds, the paddle would wake it every
+/// step, so it never falls asleep (no sleeping and waking over and over); once the paddle
+/// is more than a radius away (after 3 s), it sleeps.
+#[test]
+fn a_marble_beside_a_moving_board_stays_awake() {
+    let mut scene = resting_on_floor();
+    let mut paddle = BoardDesc::new(ShapeDesc::Cuboid {
+        half_extents: [0.005, 0.02, 0.05],
+    });
+    paddle.position = [R + 0.005 + 0.005, 0.02, 0.0];
+    paddle.velocity = [0.001, 0.0, 0.0];
+    scene.boards.push(paddle);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    // Within a radius of the paddle's bounds for the first 3 s: 150 steps (2.3 s).
+    for step in 0..150 {
+        sim.step();
+        assert!(!asleep(&sim, 0), "asleep after step {step}");
+    }
+    for _ in 0..150 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
 }
 
 /// A board that starts to move, or is moved, wakes the marbles on it, and gravity that
@@ -324,7 +465,12 @@ fn a_settled_pile_sleeps_whole_and_wakes_when_hit() {
         if step < 30 {
             woke = woke.max((0..n).filter(|&i| !asleep(&sim, i)).count());
         }
-        assert!(deepest_with(&sim, drop) < 0.05, "overlap at step {step}");
+        let pile = deepest(&sim);
+        let dropped = deepest_with(&sim, drop);
+        assert!(
+            pile < 0.05 && dropped < 0.05,
+            "overlap at step {step}: {pile} r in the pile, {dropped} r with the dropped marble"
+        );
     }
     assert!(woke > 0, "the drop woke nothing");
     let y = sim.world().get::<Position>(drop).unwrap().y;
