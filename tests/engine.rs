@@ -270,4 +270,44 @@ mod plugin {
             glam::Quat::IDENTITY
         );
     }
+
+    /// Sleeping in a Bevy app: with `StepConfig::sleep` set, a marble spawned at rest on a
+    /// floor (at 1/64 s, 0.5 s) sleeps after 32 fixed steps and not 31; a velocity set by
+    /// a system of the app wakes it, and it then moves at that velocity.
+    #[test]
+    fn plugin_sleeps_and_wakes_marbles() {
+        let mut app = App::new();
+        app.add_plugins(MarblePhysicsPlugin::default());
+        app.insert_resource(Time::<Fixed>::from_duration(Duration::from_secs_f64(
+            1.0 / 64.0,
+        )));
+        app.world_mut().resource_mut::<StepConfig>().sleep = Some(Sleep {
+            speed: 0.01,
+            time: 0.5,
+        });
+        app.world_mut().spawn((
+            Board,
+            Collider::new(BoardGeometry::single(PartShape::HalfSpace(
+                parry3d::shape::HalfSpace::new(Vec3::Y),
+            ))),
+        ));
+        let marble = app
+            .world_mut()
+            .spawn((Marble, Position(Vec3::new(0.0, 0.008, 0.0))))
+            .id();
+        app.finish();
+        for _ in 0..31 {
+            app.world_mut().run_schedule(FixedPostUpdate);
+        }
+        assert!(app.world().get::<Sleeping>(marble).is_none());
+        app.world_mut().run_schedule(FixedPostUpdate);
+        assert!(app.world().get::<Sleeping>(marble).is_some());
+        app.world_mut().get_mut::<Velocity>(marble).unwrap().0 = Vec3::new(0.5, 0.0, 0.0);
+        for _ in 0..8 {
+            app.world_mut().run_schedule(FixedPostUpdate);
+        }
+        assert!(app.world().get::<Sleeping>(marble).is_none());
+        let x = app.world().get::<Position>(marble).unwrap().x;
+        assert!((x - 0.5 * 8.0 / 64.0).abs() < 1e-5, "x = {x}");
+    }
 }
