@@ -162,6 +162,14 @@ impl Simulation {
             .collect()
     }
 
+    /// Whether the scene's marble `index` is asleep ([`crate::sleep`]; never with sleeping
+    /// off).
+    pub fn is_asleep(&self, index: usize) -> bool {
+        self.world
+            .get::<crate::sleep::Sleeping>(self.marbles[index])
+            .is_some()
+    }
+
     /// Angular velocity of the scene's marble `index` (zero when it does not spin).
     pub fn marble_spin(&self, index: usize) -> Vec3 {
         self.world

@@ -12,7 +12,7 @@ const R: f32 = 0.008;
 const DT: f32 = 1.0 / 64.0;
 
 fn asleep(sim: &Simulation, i: usize) -> bool {
-    sim.world().get::<Sleeping>(sim.marbles()[i]).is_some()
+    sim.is_asleep(i)
 }
 
 /// One marble resting on a level floor (a box whose top face is at y = 0), sleeping on.
