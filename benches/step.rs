@@ -242,12 +242,7 @@ fn settled_pile(c: &mut Criterion) {
             for _ in 0..scenes::SETTLE_STEPS {
                 sim.step();
             }
-            let world = sim.world();
-            let asleep = sim
-                .marbles()
-                .iter()
-                .filter(|&&m| world.get::<Sleeping>(m).is_some())
-                .count();
+            let asleep = sim.asleep();
             eprintln!("pour box of {n} after 6 s, {name}: {asleep} asleep");
             // The two benches time what they say: an awake pile, and one wholly asleep.
             assert_eq!(asleep, if name == "asleep" { n } else { 0 });

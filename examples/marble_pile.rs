@@ -79,12 +79,7 @@ fn main() {
                 .iter()
                 .map(|c| c.depth)
                 .fold(0.0, f32::max);
-            let world = sim.world();
-            let asleep = sim
-                .marbles()
-                .iter()
-                .filter(|&&m| world.get::<Sleeping>(m).is_some())
-                .count();
+            let asleep = sim.asleep();
             println!(
                 "{:5.1} s | {fastest:11.4} | {moving:8} | {:19.4} | {:14} | {asleep:6} | {:.0}",
                 step as f32 * scene.dt,

@@ -170,6 +170,13 @@ impl Simulation {
             .is_some()
     }
 
+    /// How many of the scene's marbles are asleep.
+    pub fn asleep(&self) -> usize {
+        (0..self.marbles.len())
+            .filter(|&i| self.is_asleep(i))
+            .count()
+    }
+
     /// Angular velocity of the scene's marble `index` (zero when it does not spin).
     pub fn marble_spin(&self, index: usize) -> Vec3 {
         self.world

@@ -48,19 +48,19 @@ fn stepping_does_not_allocate() {
         for _ in 0..10 {
             sim.step();
         }
-        let before = ALLOCATIONS.load(Ordering::Relaxed);
-        for _ in 0..100 {
-            sim.step();
-        }
-        let after = ALLOCATIONS.load(Ordering::Relaxed);
-        assert_eq!(
-            after - before,
-            0,
-            "allocations during 100 steps of {} marbles",
-            scene.marbles.len()
-        );
+        let n = scene.marbles.len();
+        assert_eq!(allocations_in_100_steps(&mut sim), 0, "{n} marbles");
     }
     a_sleeping_pile_does_not_allocate();
+}
+
+/// Allocations during 100 steps of `sim`.
+fn allocations_in_100_steps(sim: &mut Simulation) -> usize {
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    for _ in 0..100 {
+        sim.step();
+    }
+    ALLOCATIONS.load(Ordering::Relaxed) - before
 }
 
 /// A pile asleep allocates nothing either: bench scene (b) with sleeping on
@@ -68,29 +68,14 @@ fn stepping_does_not_allocate() {
 /// 100 steps. (Called from [`stepping_does_not_allocate`]: the allocation count is
 /// global, so the two must not run at once.)
 fn a_sleeping_pile_does_not_allocate() {
-    use bevy_marble::prelude::Sleeping;
     let scene = scenes::pour_box_sleeping(300);
     let mut sim = Simulation::from_scene(&scene).unwrap();
-    let all_asleep = |sim: &Simulation| {
-        sim.marbles()
-            .iter()
-            .all(|&m| sim.world().get::<Sleeping>(m).is_some())
-    };
     let mut steps = 0;
-    while !all_asleep(&sim) {
+    while sim.asleep() < scene.marbles.len() {
         sim.step();
         steps += 1;
         assert!(steps <= 360, "not all asleep after 6 s");
     }
     sim.step();
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    for _ in 0..100 {
-        sim.step();
-    }
-    let after = ALLOCATIONS.load(Ordering::Relaxed);
-    assert_eq!(
-        after - before,
-        0,
-        "allocations during 100 steps of a sleeping pile"
-    );
+    assert_eq!(allocations_in_100_steps(&mut sim), 0, "a sleeping pile");
 }

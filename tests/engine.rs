@@ -81,12 +81,7 @@ fn parallel_sleeping_is_bit_identical() {
             sim.world_mut().get_mut::<Velocity>(m).unwrap().0 = Vec3::new(0.3, 0.0, 0.0);
         }
         sim.step();
-        let world = sim.world();
-        let asleep = sim
-            .marbles()
-            .iter()
-            .filter(|&&m| world.get::<Sleeping>(m).is_some())
-            .count();
+        let asleep = sim.asleep();
         slept += asleep.saturating_sub(before);
         woke += before.saturating_sub(asleep);
         before = asleep;

@@ -410,7 +410,7 @@ fn a_settled_pile_sleeps_whole_and_wakes_when_hit() {
     let half = 0.5 * 2.2 * R * 6.0;
     let mut sim = Simulation::from_scene(&scene).unwrap();
     let n = sim.marbles().len();
-    let all_asleep = |sim: &Simulation| (0..sim.marbles().len()).all(|i| asleep(sim, i));
+    let all_asleep = |sim: &Simulation| sim.asleep() == sim.marbles().len();
     let mut steps = 0;
     while !all_asleep(&sim) {
         sim.step();
