@@ -529,7 +529,7 @@ pub struct BoardTouch {
 
 /// A fast hasher for warm-start keys (entity bits are already well spread).
 #[derive(Default, Clone, Copy)]
-struct KeyHasher(u64);
+pub(crate) struct KeyHasher(u64);
 
 impl Hasher for KeyHasher {
     fn finish(&self) -> u64 {
@@ -545,7 +545,9 @@ impl Hasher for KeyHasher {
     }
 }
 
-type KeyMap = HashMap<(u64, u64), f32, BuildHasherDefault<KeyHasher>>;
+/// Contact impulses by warm-start key: a pair's two marbles' entity bits (smaller first),
+/// or a marble's entity bits and a board piece's id with its bits flipped.
+pub(crate) type KeyMap = HashMap<(u64, u64), f32, BuildHasherDefault<KeyHasher>>;
 
 /// The hashed uniform grid of the broad phase (buffers reused between substeps).
 #[derive(Default, Debug)]
@@ -957,6 +959,31 @@ impl PairSolver {
     /// Drops the contact impulses kept for warm starting (no marble touches another).
     pub fn forget_contacts(&mut self) {
         self.warm.clear();
+    }
+
+    /// Copies into `store` the contact impulses kept for warm starting of the marbles whose
+    /// entity bits are in `sorted` (ascending), which fall asleep ([`crate::sleep`]): a
+    /// pair's key starts with its smaller entity, and a marble falls asleep with every
+    /// marble it touches.
+    pub(crate) fn stow_impulses(&self, sorted: &[u64], store: &mut KeyMap) {
+        for (key, &lambda) in &self.warm {
+            if sorted.binary_search(&key.0).is_ok() {
+                store.insert(*key, lambda);
+            }
+        }
+    }
+
+    /// Moves back from `store` the impulses of the marbles in `sorted` (ascending), which
+    /// wake, so that their first substep is warm started as if they had not slept.
+    pub(crate) fn restore_impulses(&mut self, sorted: &[u64], store: &mut KeyMap) {
+        let warm = &mut self.warm;
+        store.retain(|key, lambda| {
+            let woken = sorted.binary_search(&key.0).is_ok();
+            if woken {
+                warm.insert(*key, *lambda);
+            }
+            !woken
+        });
     }
 
     /// The contact stage's sphere: around the marble's free path over the substep (its

@@ -36,8 +36,9 @@
 //!
 //! A woken marble keeps the velocity the program gave it (zero otherwise) and starts its
 //! [`Drowsy`] time from zero; when a board moved, came or went, its board contacts from
-//! before are dropped. The contact solver's warm start is not kept over sleep: a woken
-//! pile's impulses build up again over the first substeps, as when it first settled.
+//! before are dropped. The contact impulses its group carried when it fell asleep are kept
+//! and warm start its first substep awake, so a settled pile woken as it lies holds its
+//! weight at once instead of sagging while the impulses build up again.
 //!
 //! What sleeping costs in accuracy: a marble slower than the threshold for [`Sleep::time`]
 //! (a very slow roll on a level board, the last settling of a pile) stops where it is; one
@@ -56,7 +57,7 @@ use crate::components::{
 };
 use crate::config::{GravityTilt, Sleep, StepConfig, SubstepCounter};
 use crate::narrow::{BoardCache, BoardSnapshot};
-use crate::pairs::Grid;
+use crate::pairs::{Grid, KeyMap, PairSolver};
 
 /// A marble asleep: every stage skips it until something wakes it (module docs). Remove
 /// it to wake the marble by hand.
@@ -142,6 +143,10 @@ pub struct SleepState {
     parent: Vec<u32>,
     ready: Vec<bool>,
     group_ready: Vec<bool>,
+    /// The sleeping marbles' contact impulses, kept for when they wake, and the entity
+    /// bits of the marbles falling asleep or waking (sorted).
+    impulses: KeyMap,
+    keys: Vec<u64>,
 }
 
 /// Run condition: sleeping is on.
@@ -184,7 +189,7 @@ fn changed_by_program(
 pub fn wake(
     mut commands: Commands,
     (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
-    mut state: ResMut<SleepState>,
+    (mut state, mut solver): (ResMut<SleepState>, ResMut<PairSolver>),
     mut removed: RemovedComponents<Sleeping>,
     mut sleepers: Query<
         (
@@ -229,22 +234,32 @@ pub fn wake(
     >,
 ) {
     // A marble whose `Sleeping` went (woken here last step, or by the program) starts its
-    // slow time again.
+    // slow time again, and one the program woke gets its contact impulses back.
+    let state = state.as_mut();
+    state.keys.clear();
     for entity in removed.read() {
         if let Ok((.., Some(mut drowsy))) = awake.get_mut(entity) {
             drowsy.0 = 0.0;
         }
+        state.keys.push(entity.to_bits());
     }
-    let state = state.as_mut();
+    if !state.keys.is_empty() && !state.impulses.is_empty() {
+        state.keys.sort_unstable();
+        solver.restore_impulses(&state.keys, &mut state.impulses);
+    }
     if config.sleep.is_none() {
         state.gravity = None;
         state.poses.clear();
+        state.keys.clear();
         for (entity, .., drowsy) in &mut sleepers {
             commands.entity(entity).remove::<Sleeping>();
+            state.keys.push(entity.to_bits());
             if let Some(mut drowsy) = drowsy {
                 drowsy.0 = 0.0;
             }
         }
+        state.keys.sort_unstable();
+        solver.restore_impulses(&state.keys, &mut state.impulses);
         return;
     }
     let g = seen_gravity(&config, tilt.as_deref());
@@ -363,9 +378,11 @@ pub fn wake(
             });
         }
     }
+    state.keys.clear();
     for &k in &state.queue {
         let entity = state.entities[k as usize];
         commands.entity(entity).remove::<Sleeping>();
+        state.keys.push(entity.to_bits());
         if let Ok((.., mut contacts, _, drowsy)) = sleepers.get_mut(entity) {
             if let Some(mut drowsy) = drowsy {
                 drowsy.0 = 0.0;
@@ -376,6 +393,8 @@ pub fn wake(
             }
         }
     }
+    state.keys.sort_unstable();
+    solver.restore_impulses(&state.keys, &mut state.impulses);
 }
 
 /// Last substep of each step, before the forces are cleared: adds the step to each slow
@@ -384,7 +403,7 @@ pub fn wake(
 pub fn fall_asleep(
     mut commands: Commands,
     (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
-    mut state: ResMut<SleepState>,
+    (mut state, solver): (ResMut<SleepState>, Res<PairSolver>),
     mut marbles: Query<
         (
             Entity,
@@ -484,6 +503,7 @@ pub fn fall_asleep(
             state.group_ready[r as usize] = false;
         }
     }
+    state.keys.clear();
     for (k, (entity, (position, mut velocity, _, _, radius), _, spin, _)) in
         marbles.iter_mut().enumerate()
     {
@@ -491,6 +511,7 @@ pub fn fall_asleep(
         if !(state.ready[k] && state.group_ready[r as usize]) {
             continue;
         }
+        state.keys.push(entity.to_bits());
         velocity.0 = Vec3::ZERO;
         if let Some(mut spin) = spin {
             spin.0 = Vec3::ZERO;
@@ -500,4 +521,7 @@ pub fn fall_asleep(
             radius: radius.0,
         });
     }
+    // Their contact impulses, for warm starting them when they wake.
+    state.keys.sort_unstable();
+    solver.stow_impulses(&state.keys, &mut state.impulses);
 }

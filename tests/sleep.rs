@@ -397,8 +397,8 @@ fn boards_that_move_and_gravity_that_changes_wake_marbles() {
 
 /// Marbles poured into a box (bench scene (b), 300 marbles) with sleeping on (5 mm/s for
 /// 0.5 s) settle and fall asleep as one pile within 6 s, with overlaps under 5% of the
-/// radius and none out of the box; asleep, the pile stays bit for bit where it is. A
-/// marble then dropped onto it at 1 m/s wakes it before it lands: the pile takes it
+/// radius and none out of the box; asleep, the pile stays bit for bit where it is, and
+/// woken by the program it stays put and falls asleep again. A marble then dropped onto it at 1 m/s wakes it before it lands: the pile takes it
 /// (no marble passes through another: overlaps stay under 5% of the radius, and the
 /// dropped marble ends on the pile, above its lowest layer), and everything is asleep
 /// again within 4 s.
@@ -448,6 +448,33 @@ fn a_settled_pile_sleeps_whole_and_wakes_when_hit() {
         sim.step();
     }
     assert_eq!(positions(&sim), settled, "a sleeping pile moved");
+
+    // Woken by the program, the settled pile stays where it is (its contact impulses,
+    // not kept over sleep, build up again within the first substeps): no marble moves by
+    // 1% of r before the whole pile is asleep again, 0.5 s later.
+    let marbles = sim.marbles().to_vec();
+    for &m in &marbles {
+        sim.world_mut().entity_mut(m).remove::<Sleeping>();
+    }
+    let mut steps = 0;
+    loop {
+        sim.step();
+        steps += 1;
+        let moved = positions(&sim)
+            .iter()
+            .zip(&settled)
+            .map(|(a, b)| (Vec3::from(*a) - Vec3::from(*b)).length())
+            .fold(0.0f32, f32::max);
+        assert!(
+            moved < 0.01 * R,
+            "step {steps} after waking: moved {moved} m"
+        );
+        if all_asleep(&sim) {
+            break;
+        }
+        assert!(steps <= 40, "not asleep again 40 steps after waking");
+    }
+    let settled = positions(&sim);
 
     // Drop a marble onto the middle of the pile.
     let top = settled.iter().map(|x| x[1]).fold(0.0, f32::max);
