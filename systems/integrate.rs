@@ -51,5 +51,10 @@ pub fn integrate(
         marbles.par_iter_mut().for_each(each);
         return;
     }
-    marbles.iter_mut().for_each(each);
+    // A `for` loop, not `Iterator::for_each`: through `for_each` the compiler left `each` a
+    // call per marble (callgrind, bench scene (a) at 10,000 marbles: 1,429 instructions
+    // per marble-step against 1,310 with the loop, the same bits).
+    for marble in &mut marbles {
+        each(marble);
+    }
 }
