@@ -400,23 +400,26 @@ impl NearPieces {
         }
         let reach = r + tol + spread;
         let world = sphere_aabb(x, reach);
-        let others_clear = boards.iter().enumerate().all(|(i, o)| {
-            if i == bi {
-                return true;
-            }
-            match &o.swept_aabb {
-                Some(a) => !overlaps(a, &world),
-                // Unbounded (a plane): clear if still and no piece is near.
-                None if !o.is_moving() => {
-                    let local = o.rotation.conjugate() * (x - o.position);
-                    let mut near = false;
-                    o.geometry
-                        .for_each_piece(&sphere_aabb(local, reach), |_, _, _| near = true);
-                    !near
+        // (With one board, the common case, there are no others: skip the search, whose
+        // closure the compiler leaves a call.)
+        let others_clear = boards.len() == 1
+            || boards.iter().enumerate().all(|(i, o)| {
+                if i == bi {
+                    return true;
                 }
-                None => false,
-            }
-        });
+                match &o.swept_aabb {
+                    Some(a) => !overlaps(a, &world),
+                    // Unbounded (a plane): clear if still and no piece is near.
+                    None if !o.is_moving() => {
+                        let local = o.rotation.conjugate() * (x - o.position);
+                        let mut near = false;
+                        o.geometry
+                            .for_each_piece(&sphere_aabb(local, reach), |_, _, _| near = true);
+                        !near
+                    }
+                    None => false,
+                }
+            });
         others_clear.then_some(touch)
     }
 
