@@ -220,6 +220,8 @@ pub struct NearPieces {
     /// normal (world; zero otherwise) and the anchor's gap to it.
     face_normal: Vec3,
     face_gap: f32,
+    /// Each listed piece's gap from the anchor (distance minus radius) when built.
+    gaps: [f32; NEAR_MAX],
 }
 
 impl Default for NearPieces {
@@ -236,6 +238,7 @@ impl Default for NearPieces {
             pose_version: 0,
             face_normal: Vec3::ZERO,
             face_gap: 0.0,
+            gaps: [f32::INFINITY; NEAR_MAX],
         }
     }
 }
@@ -423,6 +426,74 @@ impl NearPieces {
         others_clear.then_some(touch)
     }
 
+    /// Calls `f(piece, point, normal, gap)` (world, at the substep's start) for every
+    /// piece, other than those `skip` names, within `reach` of a marble of radius `r` at
+    /// `x` (world, at the substep's start) moving at `v`: from the list when it covers that
+    /// reach (a piece whose gap when the list was built, less how far the marble has moved
+    /// since, exceeds `reach` is passed over without a distance query), by a search of the
+    /// boards otherwise. The pair solver's speculative board rows ([`crate::pairs`]).
+    #[expect(clippy::too_many_arguments, reason = "a marble's state, handed over")]
+    pub fn within(
+        &self,
+        cache: &BoardCache,
+        x: Vec3,
+        v: Vec3,
+        r: f32,
+        reach: f32,
+        skip: impl Fn(PieceId) -> bool,
+        mut f: impl FnMut(PieceId, Vec3, Vec3, f32),
+    ) {
+        let mut visit = |bi: usize, b: &BoardSnapshot, part: usize, sub: u32, piece: &Piece| {
+            let id = PieceId::new(bi, part, sub);
+            if skip(id) {
+                return;
+            }
+            let (c, q) = (b.position, b.rotation);
+            let inv = q.conjugate();
+            let p = b.geometry.proximity(part, piece, inv * (x - c), inv * -v);
+            let gap = p.distance - r;
+            if gap <= reach {
+                f(id, q * p.point + c, q * p.normal, gap);
+            }
+        };
+        if self.is_fresh(cache, x, r, 0.0, reach) {
+            let bi = self.board as usize;
+            let b = &cache.boards[bi];
+            // On a board that has not moved, a piece's gap shrinks at most by how far the
+            // marble has moved from where the list was built.
+            let moved = if b.pose_version == self.pose_version {
+                (x - self.anchor_world).length()
+            } else {
+                f32::INFINITY
+            };
+            for (&id, &gap) in self.pieces().iter().zip(&self.gaps) {
+                if gap - moved <= reach {
+                    visit(
+                        bi,
+                        b,
+                        id.part(),
+                        id.sub(),
+                        &b.geometry.piece(id.part(), id.sub()),
+                    );
+                }
+            }
+            return;
+        }
+        let world = sphere_aabb(x, r + reach);
+        for (bi, b) in cache.boards.iter().enumerate() {
+            if let Some(a) = &b.swept_aabb
+                && !overlaps(a, &world)
+            {
+                continue;
+            }
+            let local = b.rotation.conjugate() * (x - b.position);
+            b.geometry
+                .for_each_piece(&sphere_aabb(local, r + reach), |part, sub, piece| {
+                    visit(bi, b, part, sub, piece)
+                });
+        }
+    }
+
     /// Rebuilds the list around a marble of radius `r` at `x` (world, the substep's start):
     /// the board with the nearest piece within `tol + skin`, and its pieces within that
     /// reach (the nearest [`NEAR_MAX`] of them, the reach shrunk to exclude the rest; only
@@ -480,8 +551,9 @@ impl NearPieces {
         };
         found.isolate_nearest();
         found.kept[..found.len].sort_unstable_by_key(|c| c.0);
-        for (slot, c) in self.pieces.iter_mut().zip(&found.kept[..found.len]) {
-            *slot = c.1;
+        for (k, c) in found.kept[..found.len].iter().enumerate() {
+            self.pieces[k] = c.1;
+            self.gaps[k] = c.2;
         }
         self.len = found.len as u8;
         self.anchor_world = x;

@@ -46,7 +46,9 @@
 //! 4. **Contacts: sequential impulses with warm starting.** Every touching pair, every
 //!    *speculative* pair (apart by a gap it could close during the substep, closing no
 //!    faster than the threshold: a marble about to settle onto another), and the board
-//!    contacts of those marbles, are solved together by projected Gauss–Seidel on the
+//!    contacts of those marbles (those recorded in the last substep, and speculative rows
+//!    for the pieces of their [`crate::narrow::NearPieces`] lists they could reach during
+//!    the substep), are solved together by projected Gauss–Seidel on the
 //!    velocities the marbles would reach at the end of the substep: no approaching normal
 //!    velocity (a speculative pair may approach at `gap / h`, closing its gap and no more),
 //!    each accumulated impulse ≥ 0, starting from the previous substep's impulses (a
@@ -57,7 +59,10 @@
 //!    colour at a time in SIMD lanes (each lane does the one-row update's operations in its
 //!    order, so the result is bit for bit that of one row after another). Without the speculative rows, a marble a micrometre
 //!    above its support falls freely for a substep and lands at `g h`: a settled pile
-//!    would keep jittering at centimetres per second. The impulses are then applied as *forces
+//!    would keep jittering at centimetres per second. The same holds for a board: a
+//!    marble a micrometre above the floor, with no floor contact recorded, would be free
+//!    for the solver, and the column it carries would fall for a substep; the floor
+//!    catches only the lowest marble, and the others land on it at `g h`. The impulses are then applied as *forces
 //!    over the substep* (added to each marble's acceleration), so every integrator moves
 //!    the marbles consistently with them and the marble–board response handles the boards
 //!    exactly as for a lone marble: a marble resting on another stays where it is.
@@ -98,8 +103,8 @@
 //! substep: its first 20 steps went from 43 to 28 µs per marble-step with this.)
 //!
 //! Piles need short substeps: bench scene (b) uses 8 substeps of a 1/60 s step and 15
-//! (over-relaxed) solver passes; over fourteen starts of its 1,000-marble pour the last
-//! marble above 5 cm/s stopped by 5.0 s. With fewer substeps the passes do not carry a
+//! (over-relaxed) solver passes; over fifteen starts of its 1,000-marble pour the last
+//! marble above 5 cm/s stopped by 4.8 s. With fewer substeps the passes do not carry a
 //! ten-layer pile's weight down within a substep, and the pile keeps stirring at a few
 //! cm/s (overlaps about 1% of the radius at 4 substeps, 2–3% at 2, 27–30% at 1, where
 //! whole columns land within one step; see the README's measurements). Soft contacts in solver
@@ -499,6 +504,7 @@ struct BoardGs {
     vb: Vec3,
     k: f32,
     lambda: f32,
+    target: f32,
 }
 
 impl BoardGs {
@@ -525,6 +531,11 @@ pub struct BoardTouch {
     pub piece: PieceId,
     /// Restitution of the marble and board pair.
     pub restitution: f32,
+    /// Gap at the substep's start, m: 0 for a recorded contact; positive for a
+    /// speculative row (a piece the marble does not touch but could reach during the
+    /// substep), which lets the marble close the gap and no more, and which the collision
+    /// cascade leaves alone.
+    pub gap: f32,
 }
 
 /// A fast hasher for warm-start keys (entity bits are already well spread).
@@ -892,7 +903,7 @@ pub struct PairSolver {
     first: Vec<u32>,
     /// Contact stage.
     constraints: Vec<Constraint>,
-    in_contact: Vec<bool>,
+    pub(crate) in_contact: Vec<bool>,
     warm: KeyMap,
     warm_next: KeyMap,
     /// Velocities and inverse masses in the passes.
@@ -1030,6 +1041,17 @@ impl PairSolver {
             return false;
         }
         true
+    }
+
+    /// Marks in `in_contact` the bodies the rows of [`PairSolver::find_touching`] hold:
+    /// the marbles whose board contacts, and speculative board rows, the passes need.
+    pub(crate) fn in_rows(&mut self) {
+        self.in_contact.clear();
+        self.in_contact.resize(self.bodies.len(), false);
+        for row in &self.rows {
+            self.in_contact[row.i as usize] = true;
+            self.in_contact[row.j as usize] = true;
+        }
     }
 
     /// The rest of the contact stage (module docs, steps 3–5), after
@@ -1847,7 +1869,8 @@ impl PairSolver {
                 k: 1.0 / b.w,
                 lambda: 0.0,
                 slop: PAIR_SLOP * b.r,
-                target: 0.0,
+                // A speculative row may close its gap within the substep.
+                target: if t.gap > 0.0 { -t.gap / p.h } else { 0.0 },
                 // Board keys: the marble and the piece, the piece's bits flipped so that
                 // they never equal a pair's key.
                 key: (b.entity.to_bits(), !t.piece.0),
@@ -1876,6 +1899,7 @@ impl PairSolver {
                     vb: c.vb,
                     k: c.k,
                     lambda,
+                    target: c.target,
                 });
             } else {
                 self.pair_gs.push(PairGs {
@@ -1916,7 +1940,7 @@ impl PairSolver {
             }
             largest = larger(largest, wide.max_element());
             for r in self.board_gs.iter_mut() {
-                let u = (vel[r.i as usize].truncate() - r.vb).dot(r.n);
+                let u = (vel[r.i as usize].truncate() - r.vb).dot(r.n) - r.target;
                 if let Some(d) = accumulate(&mut r.lambda, u, r.k) {
                     r.apply(vel, d);
                     largest = larger(largest, d.abs() / r.k);
@@ -2076,6 +2100,10 @@ impl Cascade<'_> {
         let mut hit = false;
         let range = self.touch_start[b] as usize..self.touch_start[b + 1] as usize;
         for t in &self.touches[range] {
+            if t.gap > 0.0 {
+                // A speculative row: the marble does not touch this piece.
+                continue;
+            }
             let u = (self.bodies[b].v + self.dv[b] - t.velocity).dot(t.normal);
             if u < -self.p.threshold {
                 let change = -(1.0 + t.restitution) * u * t.normal;

@@ -10,7 +10,7 @@ use crate::components::{
     Quarantined, Radius, Restitution, StepStart, Velocity, compensated_add,
 };
 use crate::config::StepConfig;
-use crate::narrow::BoardCache;
+use crate::narrow::{BoardCache, NearPieces};
 use crate::pairs::{BoardTouch, Body, MarbleContacts, PairParams, PairSolver};
 use crate::sleep::Sleeping;
 
@@ -49,8 +49,60 @@ fn board_touches(
             velocity: board.point_velocity(at, point),
             piece: c.piece,
             restitution: 0.5 * (restitution + board.restitution),
+            gap: 0.0,
         });
     }
+}
+
+/// Adds to the solver the speculative board rows of a marble in the pair rows (`body`, at
+/// `x` with velocity `v`, acceleration `a` and free path `d` over the substep): the pieces
+/// of its [`NearPieces`] list it does not touch but could reach during the substep (its
+/// free path's approach plus what its acceleration alone could close, as for a pair's
+/// speculative row). Without them a marble a micrometre above the floor is free for the
+/// solver, and a column resting on it falls for a substep and lands at `g h`.
+#[expect(clippy::too_many_arguments, reason = "a marble's state, handed over")]
+fn speculative_touches(
+    solver: &mut PairSolver,
+    cache: &BoardCache,
+    body: u32,
+    (x, v, a, d): (Vec3, Vec3, Vec3, Vec3),
+    r: f32,
+    contacts: &Contacts,
+    near: &NearPieces,
+    restitution: f32,
+    h: f32,
+) {
+    let reach = d.length() + a.length() * h * h;
+    let touched = |piece| contacts.iter().any(|c| c.piece == piece);
+    near.within(
+        cache,
+        x,
+        v,
+        r,
+        reach,
+        touched,
+        |piece, point, normal, gap| {
+            if gap <= 0.0 {
+                return;
+            }
+            let Some(board) = cache.boards.get(piece.board()) else {
+                return;
+            };
+            let velocity = board.point_velocity(0.0, point);
+            let closing = (-(d - velocity * h).dot(normal)).max(0.0) + a.length() * h * h;
+            if gap <= closing {
+                solver.board_touches.push(BoardTouch {
+                    body,
+                    normal,
+                    point,
+                    velocity,
+                    piece,
+                    restitution: 0.5 * (restitution + board.restitution),
+                    gap,
+                });
+            }
+        },
+    );
 }
 
 /// The displacement over the substep of a marble's free path along the boards it rests or
@@ -97,7 +149,7 @@ pub fn marble_contacts(
                 &mut Velocity,
                 &mut Acceleration,
             ),
-            (&Radius, &Mass, &Restitution, &Contacts),
+            (&Radius, &Mass, &Restitution, &Contacts, &NearPieces),
             (Option<&mut AngularVelocity>, Option<&Friction>),
         ),
         (With<Marble>, Without<Quarantined>, Without<Sleeping>),
@@ -109,7 +161,8 @@ pub fn marble_contacts(
     // The broad phase first: marbles spread apart stop there.
     recorded.list.clear();
     solver.begin(marbles.iter().len(), &mut recorded);
-    for (entity, (position, _, velocity, acceleration), (radius, _, _, contacts), _) in &marbles {
+    for (entity, (position, _, velocity, acceleration), (radius, _, _, contacts, _), _) in &marbles
+    {
         let d = free_path(&config, h, velocity.0, acceleration.0, contacts);
         let sphere = PairSolver::contact_sphere(&params, position.0, d, radius.0);
         solver.push_sphere(entity, sphere, radius.0);
@@ -125,7 +178,7 @@ pub fn marble_contacts(
         (
             entity,
             (position, _, velocity, acceleration),
-            (radius, mass, restitution, _),
+            (radius, mass, restitution, _, _),
             (spin, friction),
         ),
     ) in marbles.iter().enumerate()
@@ -152,10 +205,26 @@ pub fn marble_contacts(
     }
     solver.board_touches.clear();
     solver.touch_start.clear();
-    for (body, (_, _, (_, _, restitution, contacts), _)) in marbles.iter().enumerate() {
+    solver.in_rows();
+    for (body, (_, _, (radius, _, restitution, contacts, near), _)) in marbles.iter().enumerate() {
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
         board_touches(solver, &cache, body as u32, contacts, restitution.0, h, 0.0);
+        if solver.in_contact[body] {
+            let b = &solver.bodies[body];
+            let state = (b.x, b.v, b.a, b.d);
+            speculative_touches(
+                solver,
+                &cache,
+                body as u32,
+                state,
+                radius.0,
+                contacts,
+                near,
+                restitution.0,
+                h,
+            );
+        }
     }
     solver.touch_start.push(solver.board_touches.len() as u32);
     solver.solve_touching(&params, &mut recorded);
