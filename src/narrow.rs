@@ -459,12 +459,12 @@ impl NearPieces {
         if self.is_fresh(cache, x, r, 0.0, reach) {
             let bi = self.board as usize;
             let b = &cache.boards[bi];
-            // On a board that has not moved, a piece's gap shrinks at most by how far the
-            // marble has moved from where the list was built.
+            // A piece's gap is at most how far the marble has moved from where the list
+            // was built (in the board's frame) below its gap there.
             let moved = if b.pose_version == self.pose_version {
                 (x - self.anchor_world).length()
             } else {
-                f32::INFINITY
+                (b.rotation.conjugate() * (x - b.position) - self.anchor).length()
             };
             for (&id, &gap) in self.pieces().iter().zip(&self.gaps) {
                 if gap - moved <= reach {
