@@ -122,11 +122,23 @@ pub fn init_resources(world: &mut World) {
     world.init_resource::<crate::sleep::SleepState>();
 }
 
-/// Runs one step: `substeps` runs of the substep schedule through `run_substep`.
+/// Runs one step: `substeps` runs of the substep schedule through `run_substep`; only
+/// the first when its [`crate::sleep::wake`] found a still world (every marble asleep,
+/// none woken, no board moving, gravity not turning: [`SleepState::is_idle`]), whose
+/// other substeps would do nothing. Systems added to [`MarbleSubstep`] then run once in
+/// that step.
+///
+/// [`SleepState::is_idle`]: crate::sleep::SleepState::is_idle
 pub fn run_step(world: &mut World, mut run_substep: impl FnMut(&mut World)) {
     let count = world.resource::<StepConfig>().substeps.max(1);
     for index in 0..count {
         *world.resource_mut::<SubstepCounter>() = SubstepCounter { index, count };
         run_substep(world);
+        if world
+            .get_resource::<crate::sleep::SleepState>()
+            .is_some_and(|s| s.is_idle())
+        {
+            break;
+        }
     }
 }

@@ -40,6 +40,10 @@
 //! and warm start its first substep awake, so a settled pile woken as it lies holds its
 //! weight at once instead of sagging while the impulses build up again.
 //!
+//! A step whose [`wake`] finds a still world (every marble asleep, none woken, no board
+//! moving, gravity not turning: [`SleepState::is_idle`]) runs only its first substep
+//! ([`crate::schedule::run_step`]): the others would find nothing to do.
+//!
 //! What sleeping costs in accuracy: a marble slower than the threshold for [`Sleep::time`]
 //! (a very slow roll on a level board, the last settling of a pile) stops where it is; one
 //! above it never sleeps. A knock larger than the bound above (a chain of ever lighter
@@ -147,6 +151,20 @@ pub struct SleepState {
     /// bits of the marbles falling asleep or waking (sorted).
     impulses: KeyMap,
     keys: Vec<u64>,
+    /// Set by [`wake`]: every marble sleeps, nothing woke, no board moves and gravity
+    /// holds still, so the rest of the step's substeps would do nothing ([`run_step`]
+    /// skips them).
+    ///
+    /// [`run_step`]: crate::schedule::run_step
+    idle: bool,
+}
+
+impl SleepState {
+    /// True when this step's [`wake`] found a still world: every marble asleep, none woken,
+    /// no board moving and gravity not turning.
+    pub fn is_idle(&self) -> bool {
+        self.idle
+    }
 }
 
 /// Run condition: sleeping is on.
@@ -236,6 +254,7 @@ pub fn wake(
     // A marble whose `Sleeping` went (woken here last step, or by the program) starts its
     // slow time again, and one the program woke gets its contact impulses back.
     let state = state.as_mut();
+    state.idle = false;
     state.keys.clear();
     for entity in removed.read() {
         if let Ok((.., Some(mut drowsy))) = awake.get_mut(entity) {
@@ -315,6 +334,9 @@ pub fn wake(
             .iter()
             .any(|(sleeping, state, spin)| changed_by_program(sleeping, state, spin))
     {
+        // Nothing reached a sleeper (so no board moves and gravity holds); with no marble
+        // awake either, the step has nothing left to do.
+        state.idle = awake.is_empty();
         return;
     }
     // Every sleeping marble, in query order, with what wakes it by itself.

@@ -54,6 +54,66 @@ fn a_resting_marble_sleeps_after_sleep_time_and_stays_put() {
     assert!(asleep(&sim, 0));
 }
 
+/// The substep a step ended on (`SubstepCounter::index`).
+fn last_substep(sim: &Simulation) -> u32 {
+    sim.world()
+        .resource::<bevy_marble::config::SubstepCounter>()
+        .index
+}
+
+/// A still world (every marble asleep, no board moving) runs one substep per step instead
+/// of `substeps`, and stays bit for bit where it is; a velocity given to the sleeping
+/// marble wakes it, and that step runs every substep and moves it exactly `v t` (the floor
+/// is smooth and level, so it slides at constant velocity). A board that moves, however
+/// far from the marble, keeps every substep running.
+#[test]
+fn a_still_world_runs_one_substep_per_step() {
+    let mut scene = resting_on_floor();
+    scene.substeps = 4;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..32 {
+        sim.step();
+        assert_eq!(last_substep(&sim), 3, "awake steps run every substep");
+    }
+    assert!(asleep(&sim, 0));
+    let (x, _) = sim.marble_state(0);
+    for _ in 0..10 {
+        sim.step();
+        assert_eq!(last_substep(&sim), 0, "a still world runs one substep");
+    }
+    assert_eq!(sim.marble_state(0), (x, Vec3::ZERO));
+    let marble = sim.marbles()[0];
+    let v = Vec3::new(0.1, 0.0, 0.0);
+    sim.world_mut().get_mut::<Velocity>(marble).unwrap().0 = v;
+    sim.step();
+    assert!(!asleep(&sim, 0));
+    assert_eq!(last_substep(&sim), 3, "a woken marble steps every substep");
+    let (x1, v1) = sim.marble_state(0);
+    assert!(
+        (x1 - (x + v * DT)).length() < 1e-6,
+        "{x1} vs {}",
+        x + v * DT
+    );
+    assert!((v1 - v).length() < 1e-6, "{v1}");
+
+    // A board sliding far away: the marble sleeps, but the board moves every substep.
+    let mut far = BoardDesc::new(ShapeDesc::Cuboid {
+        half_extents: [0.05, 0.05, 0.05],
+    });
+    far.position = [10.0, 0.0, 0.0];
+    far.velocity = [0.0, 0.0, 0.1];
+    scene.boards.push(far);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..40 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    assert_eq!(last_substep(&sim), 3);
+    let board = sim.boards()[1];
+    let z = sim.world().get::<Position>(board).unwrap().0.z;
+    assert!((z - 40.0 * DT * 0.1).abs() < 1e-5, "board at z = {z}");
+}
+
 /// Sleeping off (the default), nothing sleeps; and a marble sliding down a smooth 5°
 /// slope is never slow, so it never sleeps, and slides as the exact answer says:
 /// `s = ½ g sin θ t²` after 1 s (within 0.5%).
