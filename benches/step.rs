@@ -3,8 +3,8 @@
 //!
 //! The `rolling` group steps 10,000 of them with rolling off and on; the
 //! `marble_collisions` group steps the three bench scenes (a), (b), (c) with marble–marble
-//! collisions on; the `settled_pile` group steps scene (b)'s pile once it has settled,
-//! awake and asleep.
+//! collisions on; the `labyrinth_steady` group steps (c) from where it is after 5 s; the
+//! `settled_pile` group steps scene (b)'s pile once it has settled, awake and asleep.
 //!
 //! `cargo bench --bench step`; criterion reports the time per step and, with
 //! `Throughput::Elements(N)`, marble-steps per second (ns per marble-step = 1e9 / that).
@@ -185,6 +185,24 @@ impl Fused {
     }
 }
 
+/// Bench scene (c) in its steady state ([`scenes::labyrinth_steady`]: the labyrinth after
+/// 5 s, marbles rolling on the turning floor and piled against the baffles), rebuilt from
+/// that state every 60 steps (a quarter second at the labyrinth's 1/240 s), as the other
+/// scenes are from their start. 1,000 and 10,000 marbles (building the state steps the
+/// whole labyrinth for 5 s).
+fn labyrinth_steady(c: &mut Criterion) {
+    let mut group = c.benchmark_group("labyrinth_steady");
+    group.sample_size(10);
+    for n in [1_000usize, 10_000] {
+        bench_scene(
+            &mut group,
+            BenchmarkId::from_parameter(n),
+            &scenes::labyrinth_steady(n),
+        );
+    }
+    group.finish();
+}
+
 /// Bench scene (a) stepped by the fused loop, N = 1k … 1M, rebuilt every 60 steps like
 /// the engine's.
 fn fused_loop(c: &mut Criterion) {
@@ -257,6 +275,7 @@ criterion_group!(
     benches,
     walled_board,
     rolling,
+    labyrinth_steady,
     marble_collisions,
     settled_pile,
     fused_loop

@@ -8,8 +8,9 @@
 //!
 //! Reads the median time per step of every benchmark from `target/criterion` and
 //! `bench-rapier/target/criterion`, divides by the number of marbles, prints a markdown
-//! table per bench scene (ns per marble-step; rapier's time over this engine's) and draws
-//! ns per marble-step against N, log–log, for both engines and the fused loop.
+//! table per bench scene (ns per marble-step; rapier's time over this engine's), with
+//! the labyrinth from where it is after 5 s (`labyrinth_steady`) as rows of its own, and
+//! draws ns per marble-step against N, log–log, for both engines and the fused loop.
 
 use std::path::Path;
 
@@ -88,6 +89,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 cell(fused)
             );
         }
+    }
+    // (c) from where it is after 5 s (`scenes::labyrinth_steady`; not drawn).
+    let rapier_steady = Path::new("bench-rapier/target/criterion");
+    for n in SIZES {
+        let us = per_marble(ours, "labyrinth_steady", n);
+        let them = per_marble(rapier_steady, "rapier_labyrinth_steady", n);
+        if us.is_none() && them.is_none() {
+            continue;
+        }
+        let ratio = match (them, us) {
+            (Some(t), Some(u)) => format!("{:.1}×", t / u),
+            _ => "–".into(),
+        };
+        println!(
+            "| (c) labyrinth after 5 s | {n} | {} | {} | {ratio} | – |",
+            cell(us),
+            cell(them)
+        );
     }
 
     let all = [

@@ -306,3 +306,29 @@ mod plugin {
         assert!((x - 0.5 * 8.0 / 64.0).abs() < 1e-5, "x = {x}");
     }
 }
+
+/// `scenes::labyrinth_steady` starts where the labyrinth got to after 5 s: stepped once,
+/// its marbles are where the labyrinth's own next step puts them, within 1 µm (its
+/// contact impulses start cold, which measured 0.015 µm here), and none has left the
+/// board's footprint.
+#[test]
+fn the_steady_labyrinth_starts_where_the_labyrinth_got_to() {
+    use bevy_marble::scenes;
+    let n = 48;
+    let scene = scenes::labyrinth(n);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let steps = (scenes::LABYRINTH_STEADY / scene.dt).round() as u64;
+    for _ in 0..=steps {
+        sim.step();
+    }
+    let mut steady = Simulation::from_scene(&scenes::labyrinth_steady(n)).unwrap();
+    steady.step();
+    let mut worst = 0.0f32;
+    for i in 0..n {
+        let (a, _) = sim.marble_state(i);
+        let (b, _) = steady.marble_state(i);
+        worst = worst.max((a - b).length());
+        assert!(b.x.abs() < 0.2 && b.z.abs() < 0.2, "marble {i} at {b}");
+    }
+    assert!(worst < 1e-6, "worst difference {worst} m");
+}

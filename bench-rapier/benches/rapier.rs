@@ -58,6 +58,20 @@ fn rapier(c: &mut Criterion) {
     group.finish();
 }
 
+/// Bench scene (c) in its steady state, as bevy_marble's `labyrinth_steady` group times
+/// it: the marbles where bevy_marble's labyrinth put them after 5 s
+/// ([`bevy_marble::scenes::labyrinth_steady`]), the same configuration for both engines,
+/// each starting without cached contacts; rebuilt every 60 steps.
+fn labyrinth_steady(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rapier_labyrinth_steady");
+    group.sample_size(10);
+    for n in [1_000usize, 10_000] {
+        let scene = bevy_marble::scenes::labyrinth_steady(n);
+        bench_scene(&mut group, BenchmarkId::from_parameter(n), &scene);
+    }
+    group.finish();
+}
+
 /// Bench scene (b)'s pile once settled, as bevy_marble's `settled_pile` group times it,
 /// step after step: `awake`, every marble kept awake
 /// (`RigidBodyActivation::cannot_sleep`), stepped for [`SETTLE_STEPS`] (6 s) outside the
@@ -99,5 +113,5 @@ fn settled_pile(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, rapier, settled_pile);
+criterion_group!(benches, rapier, labyrinth_steady, settled_pile);
 criterion_main!(benches);

@@ -40,7 +40,10 @@ fn default_marbles_weigh_as_glass() {
     let mass = world.bodies[world.marbles[0]].mass();
     let r = scene.marbles[0].radius;
     let glass = 2500.0 * 4.0 / 3.0 * std::f32::consts::PI * r.powi(3);
-    assert!((mass - glass).abs() < 1e-6 * glass.max(1.0), "{mass} vs {glass}");
+    assert!(
+        (mass - glass).abs() < 1e-6 * glass.max(1.0),
+        "{mass} vs {glass}"
+    );
 }
 
 #[test]
@@ -56,7 +59,11 @@ fn marbles_stay_in_the_walled_board_and_the_box() {
             assert_eq!(s.non_finite, 0, "{}", kind.name());
             assert_eq!(s.outside, 0, "{}: {s:?}", kind.name());
             // Resting on the floor: sunk less than a fifth of the radius.
-            assert!(s.min_y > 0.8 * scene.marbles[0].radius, "{}: {s:?}", kind.name());
+            assert!(
+                s.min_y > 0.8 * scene.marbles[0].radius,
+                "{}: {s:?}",
+                kind.name()
+            );
         }
     }
 }
