@@ -1,15 +1,21 @@
 //! Steps a bench scene for profiling: `cargo run --release --example profile_scene --
 //! SCENE N STEPS [collisions|off|rolling|noboards]`, e.g. `walled_board 10000 60 collisions`
-//! (`rolling`: spin and friction on, marble collisions off).
+//! (`rolling`: spin and friction on, marble collisions off). SCENE `labyrinth_steady` is
+//! the labyrinth from where it is after 5 s (building it steps the labyrinth for 5 s).
 use bevy_marble::prelude::*;
 use bevy_marble::scenes::BenchScene;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let kind = BenchScene::from_name(args.get(1).map_or("walled_board", |s| s)).expect("scene");
+    let name = args.get(1).map_or("walled_board", |s| s);
     let n: usize = args.get(2).map_or(10_000, |s| s.parse().expect("N"));
     let steps: usize = args.get(3).map_or(60, |s| s.parse().expect("STEPS"));
-    let mut scene = kind.build(n);
+    let (label, mut scene) = if name == "labyrinth_steady" {
+        (name, bevy_marble::scenes::labyrinth_steady(n))
+    } else {
+        let kind = BenchScene::from_name(name).expect("scene");
+        (kind.name(), kind.build(n))
+    };
     if let Some(c) = args.get(4) {
         scene.marble_collisions = c == "collisions";
         scene.rolling |= c == "rolling";
@@ -23,8 +29,5 @@ fn main() {
         sim.step();
     }
     let ns = start.elapsed().as_nanos() as f64 / (steps * n) as f64;
-    println!(
-        "{} x {n}, {steps} steps: {ns:.0} ns per marble-step",
-        kind.name()
-    );
+    println!("{label} x {n}, {steps} steps: {ns:.0} ns per marble-step");
 }
