@@ -186,7 +186,7 @@ impl Fused {
 }
 
 /// Bench scene (c) in its steady state ([`scenes::labyrinth_steady`]: the labyrinth after
-/// 5 s, marbles rolling on the turning floor and piled against the baffles), rebuilt from
+/// 5 s, marbles sliding on the turning floor and piled against the baffles), rebuilt from
 /// that state every 60 steps (a quarter second at the labyrinth's 1/240 s), as the other
 /// scenes are from their start. 1,000 and 10,000 marbles (building the state steps the
 /// whole labyrinth for 5 s).

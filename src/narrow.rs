@@ -427,11 +427,15 @@ impl NearPieces {
     }
 
     /// Calls `f(piece, point, normal, gap)` (world, at the substep's start) for every
-    /// piece, other than those `skip` names, within `reach` of a marble of radius `r` at
-    /// `x` (world, at the substep's start) moving at `v`: from the list when it covers that
-    /// reach (a piece whose gap when the list was built, less how far the marble has moved
-    /// since, exceeds `reach` is passed over without a distance query), by a search of the
-    /// boards otherwise. The pair solver's speculative board rows ([`crate::pairs`]).
+    /// piece, other than those `skip` names, that a marble of radius `r` at `x` (world, at
+    /// the substep's start) moving at `v` could reach within a substep of length `h`: one
+    /// within `reach` (the marble's own motion) plus how far the piece's board can move
+    /// towards it in the substep (its speed plus its turn times the distance, bounded
+    /// over the reach). The list's board is read from the list when it covers that reach
+    /// (a piece whose gap when the list was built, less how far the marble has moved since
+    /// in the board's frame, is out of reach is passed over without a distance query);
+    /// every other board, and the list's when it does not cover, is searched. The pair
+    /// solver's speculative board rows ([`crate::pairs`]).
     #[expect(clippy::too_many_arguments, reason = "a marble's state, handed over")]
     pub fn within(
         &self,
@@ -440,56 +444,52 @@ impl NearPieces {
         v: Vec3,
         r: f32,
         reach: f32,
+        h: f32,
         skip: impl Fn(PieceId) -> bool,
         mut f: impl FnMut(PieceId, Vec3, Vec3, f32),
     ) {
-        let mut visit = |bi: usize, b: &BoardSnapshot, part: usize, sub: u32, piece: &Piece| {
-            let id = PieceId::new(bi, part, sub);
-            if skip(id) {
-                return;
-            }
-            let (c, q) = (b.position, b.rotation);
-            let inv = q.conjugate();
-            let p = b.geometry.proximity(part, piece, inv * (x - c), inv * -v);
-            let gap = p.distance - r;
-            if gap <= reach {
-                f(id, q * p.point + c, q * p.normal, gap);
-            }
-        };
-        if self.is_fresh(cache, x, r, 0.0, reach) {
-            let bi = self.board as usize;
-            let b = &cache.boards[bi];
-            // A piece's gap is at most how far the marble has moved from where the list
-            // was built (in the board's frame) below its gap there.
-            let moved = if b.pose_version == self.pose_version {
-                (x - self.anchor_world).length()
-            } else {
-                (b.rotation.conjugate() * (x - b.position) - self.anchor).length()
-            };
-            for (&id, &gap) in self.pieces().iter().zip(&self.gaps) {
-                if gap - moved <= reach {
-                    visit(
-                        bi,
-                        b,
-                        id.part(),
-                        id.sub(),
-                        &b.geometry.piece(id.part(), id.sub()),
-                    );
+        let mut visit =
+            |bi: usize, b: &BoardSnapshot, part: usize, sub: u32, piece: &Piece, limit: f32| {
+                let id = PieceId::new(bi, part, sub);
+                if skip(id) {
+                    return;
                 }
-            }
-            return;
-        }
-        let world = sphere_aabb(x, r + reach);
+                let (c, q) = (b.position, b.rotation);
+                let inv = q.conjugate();
+                let p = b.geometry.proximity(part, piece, inv * (x - c), inv * -v);
+                let gap = p.distance - r;
+                if gap <= limit {
+                    f(id, q * p.point + c, q * p.normal, gap);
+                }
+            };
         for (bi, b) in cache.boards.iter().enumerate() {
+            let turn = b.angular_velocity.length() * ((x - b.position).length() + r + reach);
+            let limit = reach + (b.velocity.length() + turn) * h;
+            if bi == self.board as usize && self.is_fresh(cache, x, r, 0.0, limit) {
+                // A piece's gap is at most how far the marble has moved from where the
+                // list was built (in the board's frame) below its gap there.
+                let moved = if b.pose_version == self.pose_version {
+                    (x - self.anchor_world).length()
+                } else {
+                    (b.rotation.conjugate() * (x - b.position) - self.anchor).length()
+                };
+                for (&id, &gap) in self.pieces().iter().zip(&self.gaps) {
+                    if gap - moved <= limit {
+                        let piece = b.geometry.piece(id.part(), id.sub());
+                        visit(bi, b, id.part(), id.sub(), &piece, limit);
+                    }
+                }
+                continue;
+            }
             if let Some(a) = &b.swept_aabb
-                && !overlaps(a, &world)
+                && !overlaps(a, &sphere_aabb(x, r + limit))
             {
                 continue;
             }
             let local = b.rotation.conjugate() * (x - b.position);
             b.geometry
-                .for_each_piece(&sphere_aabb(local, r + reach), |part, sub, piece| {
-                    visit(bi, b, part, sub, piece)
+                .for_each_piece(&sphere_aabb(local, r + limit), |part, sub, piece| {
+                    visit(bi, b, part, sub, piece, limit)
                 });
         }
     }
@@ -1310,6 +1310,73 @@ mod tests {
             }
         }
         assert!(compared == 4000 && lone > 150, "{lone} lone touches");
+    }
+
+    /// [`NearPieces::within`] through a list finds exactly the pieces, with the same gaps,
+    /// that it finds by searching every board (a default list covers nothing), for centres
+    /// within the list's reach and beyond it, reaches from a fifth of a radius to three
+    /// radii, on a still board, after the board was moved and turned since the list was
+    /// built, and on a turning board (its reach grows with its turn). A second board, a
+    /// plane cutting through the box just above its floor, is near the same marbles: a
+    /// list holds one board's pieces, so the other must still be searched.
+    #[test]
+    fn near_lists_find_the_speculative_pieces_a_search_finds() {
+        let mut rng = Lcg(11);
+        let mut found = [0usize; 2];
+        let with_plane = |spin: Vec3| {
+            let mut cache = boards(spin);
+            cache.boards[0].position = Vec3::new(0.0, 0.5 + 1.5 * R, 0.0);
+            cache
+        };
+        for spin in [Vec3::ZERO, Vec3::new(0.3, 0.0, 0.5)] {
+            for moved in [false, true] {
+                let mut cache = with_plane(spin);
+                for _ in 0..200 {
+                    let anchor = near_the_box(&cache, &mut rng);
+                    let tol = touch_tolerance(1e-4, R, anchor);
+                    let mut list = NearPieces::default();
+                    list.rebuild(&cache, anchor, R, tol, 3.0 * R);
+                    if moved {
+                        let b = &mut cache.boards[1];
+                        b.position += Vec3::new(0.2, -0.1, 0.3) * R;
+                        b.rotation = Quat::from_rotation_y(0.01) * b.rotation;
+                        b.pose_version += 1;
+                    }
+                    for _ in 0..5 {
+                        let x = anchor + rng.vec(Vec3::splat(4.0 * R));
+                        let v = rng.vec(Vec3::splat(0.5));
+                        for reach in [0.2 * R, R, 3.0 * R] {
+                            let collect = |near: &NearPieces| {
+                                let mut out = Vec::new();
+                                near.within(
+                                    &cache,
+                                    x,
+                                    v,
+                                    R,
+                                    reach,
+                                    cache.h,
+                                    |_| false,
+                                    |piece, point, normal, gap| {
+                                        out.push((piece, gap.to_bits(), point, normal))
+                                    },
+                                );
+                                out.sort_by_key(|t| (t.0, t.1));
+                                out
+                            };
+                            let searched = collect(&NearPieces::default());
+                            assert_eq!(collect(&list), searched, "at {x}, reach {reach}");
+                            for t in &searched {
+                                found[t.0.board()] += 1;
+                            }
+                        }
+                    }
+                    if moved {
+                        cache = with_plane(spin);
+                    }
+                }
+            }
+        }
+        assert!(found[0] > 300 && found[1] > 1000, "pieces found: {found:?}");
     }
 
     /// The event loop's result for a marble touching what [`gather`] finds at its start,

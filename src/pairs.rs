@@ -106,7 +106,7 @@
 //! (over-relaxed) solver passes; over fifteen starts of its 1,000-marble pour the last
 //! marble above 5 cm/s stopped by 4.8 s. With fewer substeps the passes do not carry a
 //! ten-layer pile's weight down within a substep, and the pile keeps stirring at a few
-//! cm/s (overlaps about 1% of the radius at 4 substeps, 2–3% at 2, 27–30% at 1, where
+//! cm/s (overlaps 0.3–0.7% of the radius at 4 substeps, 2–3% at 2, 27–30% at 1, where
 //! whole columns land within one step; see the README's measurements). Soft contacts in solver
 //! substeps (Box2D v3's soft step: 30 Hz contacts, damping ratio 10, four solver
 //! substeps of a 1/60 s step) were tried and measured: under a column of six 8 mm marbles

@@ -35,7 +35,9 @@ pub enum MarbleSystems {
     /// Kinematic boards advance.
     MoveBoards,
     /// Last substep only: with sleeping on, put to sleep the groups that have been slow
-    /// long enough ([`crate::sleep`]); clear forces, quarantine non-finite marbles.
+    /// long enough ([`crate::sleep`]); clear forces, quarantine non-finite marbles. A step
+    /// of a still world (every marble asleep, nothing moving: see [`run_step`]) runs only
+    /// its first substep, so this stage does not run in it (it would find no awake marble).
     Finish,
 }
 
@@ -126,7 +128,8 @@ pub fn init_resources(world: &mut World) {
 /// the first when its [`crate::sleep::wake`] found a still world (every marble asleep,
 /// none woken, no board moving, gravity not turning: [`SleepState::is_idle`]), whose
 /// other substeps would do nothing. Systems added to [`MarbleSubstep`] then run once in
-/// that step.
+/// that step, and those of the last substep ([`MarbleSystems::Finish`], or run if
+/// [`SubstepCounter::is_last`]) not at all.
 ///
 /// [`SleepState::is_idle`]: crate::sleep::SleepState::is_idle
 pub fn run_step(world: &mut World, mut run_substep: impl FnMut(&mut World)) {

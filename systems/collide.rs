@@ -56,10 +56,13 @@ fn board_touches(
 
 /// Adds to the solver the speculative board rows of a marble in the pair rows (`body`, at
 /// `x` with velocity `v`, acceleration `a` and free path `d` over the substep): the pieces
-/// of its [`NearPieces`] list it does not touch but could reach during the substep (its
-/// free path's approach plus what its acceleration alone could close, as for a pair's
-/// speculative row). Without them a marble a micrometre above the floor is free for the
-/// solver, and a column resting on it falls for a substep and lands at `g h`.
+/// it does not touch according to its recorded contacts but could reach during the
+/// substep (its free path's approach plus what its acceleration alone could close, as for
+/// a pair's speculative row, with the board's own motion; found through its
+/// [`NearPieces`] list). Without them a marble a micrometre above the floor is free for
+/// the solver, and a column resting on it falls for a substep and lands at `g h`. A piece
+/// it touches that its recorded contacts lack (the first substep, or after a sleeping
+/// marble's contacts were dropped) becomes an ordinary contact row (gap 0).
 #[expect(clippy::too_many_arguments, reason = "a marble's state, handed over")]
 fn speculative_touches(
     solver: &mut PairSolver,
@@ -80,11 +83,9 @@ fn speculative_touches(
         v,
         r,
         reach,
+        h,
         touched,
         |piece, point, normal, gap| {
-            if gap <= 0.0 {
-                return;
-            }
             let Some(board) = cache.boards.get(piece.board()) else {
                 return;
             };
@@ -98,7 +99,7 @@ fn speculative_touches(
                     velocity,
                     piece,
                     restitution: 0.5 * (restitution + board.restitution),
-                    gap,
+                    gap: gap.max(0.0),
                 });
             }
         },
