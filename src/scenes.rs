@@ -192,7 +192,7 @@ pub const SETTLE_STEPS: u64 = 360;
 
 /// [`pour_box`] with sleeping on: marbles slower than 5 mm/s for half a second fall asleep
 /// ([`crate::sleep`]). Over thirteen starts of the 1,000-marble pour (`examples/marble_pile`
-/// with seeds 0–12) the whole pile was asleep by 2.5–5.5 s (median 3.5 s).
+/// with seeds 0–12) the whole pile was asleep by 2.0–7.5 s (median 3.5 s).
 pub fn pour_box_sleeping(n: usize) -> Scene {
     Scene {
         sleep_speed: 0.005,
