@@ -87,6 +87,10 @@ pub struct BoardSnapshot {
     /// Changes whenever the board's pose at a substep's start differs from the last
     /// substep's (set by the prepare stage).
     pub pose_version: u32,
+    /// The substep's length and [`BoardSnapshot::pose_at`] its start and end, computed
+    /// once for a turning board ([`BoardSnapshot::with_poses`]): every marble on it asks
+    /// for them.
+    pub poses: Option<(f32, (Vec3, Quat), (Vec3, Quat))>,
 }
 
 impl BoardSnapshot {
@@ -99,6 +103,28 @@ impl BoardSnapshot {
     /// Pose at time `t` after the substep's start.
     #[inline]
     pub fn pose_at(&self, t: f32) -> (Vec3, Quat) {
+        if let Some((h, start, end)) = self.poses {
+            if t == 0.0 {
+                return start;
+            }
+            if t == h {
+                return end;
+            }
+        }
+        self.pose_computed(t)
+    }
+
+    /// The snapshot with its poses at the start and end of a substep of length `h`
+    /// computed once, when it turns (they cost a sine and a normalisation each).
+    pub fn with_poses(mut self, h: f32) -> Self {
+        if self.angular_velocity != Vec3::ZERO {
+            self.poses = Some((h, self.pose_computed(0.0), self.pose_computed(h)));
+        }
+        self
+    }
+
+    /// [`BoardSnapshot::pose_at`], computed.
+    fn pose_computed(&self, t: f32) -> (Vec3, Quat) {
         if self.angular_velocity == Vec3::ZERO {
             (self.position + self.velocity * t, self.rotation)
         } else {
@@ -1171,6 +1197,7 @@ mod tests {
                 swept_aabb: None,
                 reach: f32::INFINITY,
                 pose_version: 0,
+                poses: None,
             };
         let mut cache = BoardCache {
             h: 1.0 / 60.0,

@@ -64,21 +64,25 @@ pub fn prepare_boards(
                 Aabb::new(position.0.min(end_pos) - r, position.0.max(end_pos) + r)
             }
         });
-        cache.boards.push(BoardSnapshot {
-            entity,
-            geometry: collider.0.clone(),
-            position: position.0,
-            rotation: rotation.0,
-            velocity: velocity.0,
-            angular_velocity: angular.0,
-            restitution: restitution.0,
-            friction: friction.0,
-            rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
-            spin_damping: spin_damping.map_or(0.0, |c| c.0),
-            swept_aabb,
-            reach,
-            pose_version: 0,
-        });
+        cache.boards.push(
+            BoardSnapshot {
+                entity,
+                geometry: collider.0.clone(),
+                position: position.0,
+                rotation: rotation.0,
+                velocity: velocity.0,
+                angular_velocity: angular.0,
+                restitution: restitution.0,
+                friction: friction.0,
+                rolling_resistance: rolling_resistance.map_or(0.0, |c| c.0),
+                spin_damping: spin_damping.map_or(0.0, |c| c.0),
+                swept_aabb,
+                reach,
+                pose_version: 0,
+                poses: None,
+            }
+            .with_poses(h),
+        );
     }
     cache.update_epoch();
 }
