@@ -527,7 +527,7 @@ pub fn fall_asleep(
     }
     state.keys.clear();
     for (k, (entity, (position, mut velocity, _, _, radius), _, spin, _)) in
-        marbles.iter_mut().enumerate()
+        (0usize..).zip(&mut marbles)
     {
         let r = root(&mut state.parent, k as u32);
         if !(state.ready[k] && state.group_ready[r as usize]) {

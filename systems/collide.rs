@@ -174,17 +174,16 @@ pub fn marble_contacts(
         return;
     }
     solver.bodies.clear();
+    // (Plain loops with a counter: through `enumerate` the compiler leaves the query's
+    // `next` a call per marble.)
     for (
-        k,
-        (
-            entity,
-            (position, _, velocity, acceleration),
-            (radius, mass, restitution, _, _),
-            (spin, friction),
-        ),
-    ) in marbles.iter().enumerate()
+        entity,
+        (position, _, velocity, acceleration),
+        (radius, mass, restitution, _, _),
+        (spin, friction),
+    ) in &marbles
     {
-        let d = solver.paths[k];
+        let d = solver.paths[solver.bodies.len()];
         solver.bodies.push(Body {
             entity,
             x: position.0,
@@ -207,7 +206,7 @@ pub fn marble_contacts(
     solver.board_touches.clear();
     solver.touch_start.clear();
     solver.in_rows();
-    for (body, (_, _, (radius, _, restitution, contacts, near), _)) in marbles.iter().enumerate() {
+    for (body, (_, _, (radius, _, restitution, contacts, near), _)) in (0usize..).zip(&marbles) {
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
         board_touches(solver, &cache, body as u32, contacts, restitution.0, h, 0.0);
@@ -230,7 +229,7 @@ pub fn marble_contacts(
     solver.touch_start.push(solver.board_touches.len() as u32);
     solver.solve_touching(&params, &mut recorded);
     for (k, (_, (mut position, mut carry, mut velocity, mut acceleration), _, (spin, _))) in
-        marbles.iter_mut().enumerate()
+        (0usize..).zip(&mut marbles)
     {
         if !solver.changed[k] {
             continue;
@@ -304,12 +303,12 @@ pub fn collide_marbles(
     }
     solver.board_touches.clear();
     solver.touch_start.clear();
-    for (body, (_, _, (_, _, _, restitution, contacts))) in marbles.iter().enumerate() {
+    for (body, (_, _, (_, _, _, restitution, contacts))) in (0usize..).zip(&marbles) {
         board_touches(solver, &cache, body as u32, contacts, restitution.0, h, h);
     }
     solver.touch_start.push(solver.board_touches.len() as u32);
     solver.resolve_impacts(&params, &cache.boards, &mut recorded);
-    for (k, (_, (mut position, mut carry, mut velocity), _)) in marbles.iter_mut().enumerate() {
+    for (k, (_, (mut position, mut carry, mut velocity), _)) in (0usize..).zip(&mut marbles) {
         if !solver.changed[k] {
             continue;
         }
