@@ -1040,18 +1040,15 @@ impl PairSolver {
             self.warm.clear();
             return false;
         }
-        true
-    }
-
-    /// Marks in `in_contact` the bodies the rows of [`PairSolver::find_touching`] hold:
-    /// the marbles whose board contacts, and speculative board rows, the passes need.
-    pub(crate) fn in_rows(&mut self) {
+        // The marbles in the rows: those whose board contacts, and speculative board rows,
+        // the passes need.
         self.in_contact.clear();
-        self.in_contact.resize(self.bodies.len(), false);
+        self.in_contact.resize(n, false);
         for row in &self.rows {
             self.in_contact[row.i as usize] = true;
             self.in_contact[row.j as usize] = true;
         }
+        true
     }
 
     /// The rest of the contact stage (module docs, steps 3–5), after
@@ -1833,10 +1830,8 @@ impl PairSolver {
     /// reach at the end of the substep; the impulses become forces over the substep
     /// (added to `a`), so every integrator moves the marbles consistently with them.
     fn solve_contacts(&mut self, p: &PairParams) {
-        let n = self.bodies.len();
         self.constraints.clear();
-        self.in_contact.clear();
-        self.in_contact.resize(n, false);
+        // (`in_contact` marks the marbles in the rows: [`PairSolver::find_touching`].)
         for row in &self.rows {
             let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
             let (ka, kb) = (a.entity.to_bits(), b.entity.to_bits());
@@ -1852,8 +1847,6 @@ impl PairSolver {
                 target: -row.gap / p.h,
                 key: (ka.min(kb), ka.max(kb)),
             });
-            self.in_contact[row.i as usize] = true;
-            self.in_contact[row.j as usize] = true;
         }
         for t in &self.board_touches {
             if !self.in_contact[t.body as usize] {

@@ -205,7 +205,6 @@ pub fn marble_contacts(
     }
     solver.board_touches.clear();
     solver.touch_start.clear();
-    solver.in_rows();
     for (body, (_, _, (radius, _, restitution, contacts, near), _)) in (0usize..).zip(&marbles) {
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
