@@ -206,24 +206,28 @@ pub fn marble_contacts(
     solver.board_touches.clear();
     solver.touch_start.clear();
     for (body, (_, _, (radius, _, restitution, contacts, near), _)) in (0usize..).zip(&marbles) {
+        // Only the marbles in the rows: the contact stage reads no other marble's boards
+        // (its cascade and passes run on the rows' marbles).
+        if !solver.in_contact[body] {
+            solver.touch_start.push(solver.board_touches.len() as u32);
+            continue;
+        }
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
         board_touches(solver, &cache, body as u32, contacts, restitution.0, h, 0.0);
-        if solver.in_contact[body] {
-            let b = &solver.bodies[body];
-            let state = (b.x, b.v, b.a, b.d);
-            speculative_touches(
-                solver,
-                &cache,
-                body as u32,
-                state,
-                radius.0,
-                contacts,
-                near,
-                restitution.0,
-                h,
-            );
-        }
+        let b = &solver.bodies[body];
+        let state = (b.x, b.v, b.a, b.d);
+        speculative_touches(
+            solver,
+            &cache,
+            body as u32,
+            state,
+            radius.0,
+            contacts,
+            near,
+            restitution.0,
+            h,
+        );
     }
     solver.touch_start.push(solver.board_touches.len() as u32);
     solver.solve_touching(&params, &mut recorded);
