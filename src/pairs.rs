@@ -206,6 +206,13 @@ const BOARD_IMPACTS: usize = 4;
 const PROJECTION_PASSES: usize = 4;
 
 /// A Gauss–Seidel pass that changes no velocity by more than this (m/s) ends the solve.
+///
+/// It rarely does in a pile: in bench scene (b)'s settled 1,000-marble pile the last of
+/// the 15 passes still changes some pair's closing speed by about 1.2e-6 m/s (ordinary
+/// contacts deep in the pile, each pass moving them by about as much as the one before),
+/// and a looser tolerance only moves that level with it: at 1e-5 the change sits at
+/// 1.2e-5 m/s, at 1e-4 half the substeps still run all 15 passes. The passes cannot be cut
+/// by a tolerance, then (measured with the settled pile's per-pass changes printed).
 const CONVERGED: f32 = 1e-6;
 
 /// One marble as the pair stage sees it.
