@@ -2178,6 +2178,8 @@ fn rounding_slack(bodies: &[Body]) -> f32 {
     16.0 * f32::EPSILON * far
 }
 
+/// The candidate pairs of the last [`PairSolver::cover`]: the standing candidates of
+/// marbles that stayed inside their bounds, and the strays' pairs.
 fn candidate_pairs<'a>(
     candidates: &'a [(u32, u32)],
     extra: &'a [(u32, u32)],
