@@ -45,6 +45,14 @@ fn series(label: &'static str, dir: &Path, id: &str, colour: RGBColor, dashed: b
     }
 }
 
+/// Rapier's time over this engine's, "–" when either did not run.
+fn ratio(them: Option<f64>, us: Option<f64>) -> String {
+    match (them, us) {
+        (Some(t), Some(u)) => format!("{:.1}×", t / u),
+        _ => "–".into(),
+    }
+}
+
 fn cell(v: Option<f64>) -> String {
     v.map_or("–".into(), |t| format!("{t:.0}"))
 }
@@ -79,10 +87,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 Some(off) => format!("{} ({off:.0} collisions off)", cell(us)),
                 None => cell(us),
             };
-            let ratio = match (them, us) {
-                (Some(t), Some(u)) => format!("{:.1}×", t / u),
-                _ => "–".into(),
-            };
+            let ratio = ratio(them, us);
             println!(
                 "| {title} | {n} | {engine} | {} | {ratio} | {} |",
                 cell(them),
@@ -98,10 +103,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if us.is_none() && them.is_none() {
             continue;
         }
-        let ratio = match (them, us) {
-            (Some(t), Some(u)) => format!("{:.1}×", t / u),
-            _ => "–".into(),
-        };
+        let ratio = ratio(them, us);
         println!(
             "| (c) labyrinth after 5 s | {n} | {} | {} | {ratio} | – |",
             cell(us),
