@@ -103,6 +103,7 @@ impl HeightTrace {
     }
 
     /// Writes the plot as SVG (atomically).
+    #[cfg(feature = "cli")]
     pub fn write_svg(&self, path: &Path, title: &str) -> io::Result<()> {
         use plotters::prelude::*;
         let (mut t1, mut y0, mut y1) = (0.0f32, f32::INFINITY, f32::NEG_INFINITY);
@@ -144,6 +145,7 @@ impl HeightTrace {
 }
 
 /// Writes `bytes` to `path` through an [`AtomicFile`].
+#[cfg(feature = "cli")]
 fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
     let mut f = AtomicFile::create(path)?;
     f.writer().write_all(bytes)?;
@@ -153,6 +155,7 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
 /// Writes the error-versus-cost plot of one reference scene of the study (log–log, one
 /// colour per integrator, filled marks for CCD on, the Pareto front joined by a line).
 /// Errors of exactly 0 are drawn at the bottom of the axis.
+#[cfg(feature = "cli")]
 pub fn write_tradeoff_svg(
     rows: &[crate::study::Row],
     reference: crate::study::Reference,
