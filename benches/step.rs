@@ -250,7 +250,7 @@ fn settled_pile(c: &mut Criterion) {
     let mut group = c.benchmark_group("settled_pile");
     group.sample_size(10);
     // 1,000 marbles only: the 10,000-marble pour still has marbles stirring at 5–9 cm/s
-    // after 8 s (README, "Many marbles"), so its one touching group never sleeps.
+    // after 8 s (`docs/pair-solver.md`, "What piles need"), so its one touching group never sleeps.
     for n in [1_000usize] {
         for (name, scene) in [
             ("awake", scenes::pour_box(n)),

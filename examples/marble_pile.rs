@@ -7,7 +7,7 @@
 //! [SEED] [SECONDS] [SLEEP_MM_S]` (defaults: 1000, the scene's 8 substeps and 15 passes,
 //! the scene's own start, 6 s, no sleeping). A SEED nudges every marble by up to 5 µm:
 //! another start of the same pour. Try fewer substeps to see why the scene uses 8
-//! (README, "Many marbles"). With SLEEP_MM_S, marbles slower than that many mm/s for
+//! (`docs/pair-solver.md`, "What piles need"). With SLEEP_MM_S, marbles slower than that many mm/s for
 //! half a second fall asleep (`sleep_speed`), and the table counts the sleeping ones and
 //! the wall time of each half second.
 

@@ -91,7 +91,7 @@ impl Default for Rotation {
     StepStart,
     Contacts,
     PositionCarry,
-    crate::narrow::NearPieces
+    crate::board_contact::NearPieces
 )]
 pub struct Marble;
 

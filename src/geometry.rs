@@ -17,7 +17,7 @@
 //! function of time along a marble's path (continuous collision advances on it), and the
 //! closest point on a piece gives an exact contact normal. Working per triangle rather than
 //! per mesh lets a marble touch several faces of a concave mesh at once; the contact filter
-//! in [`crate::narrow`] drops the redundant contacts that internal edges and coplanar seams
+//! in [`crate::board_contact`] drops the redundant contacts that internal edges and coplanar seams
 //! would add ("ghost bumps").
 
 use std::fmt;

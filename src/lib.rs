@@ -1,11 +1,11 @@
-#![doc = include_str!("../README.md")]
+#![doc = include_str!("../docs/crate.md")]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod board_contact;
 pub mod components;
 pub mod config;
 pub mod geometry;
-pub mod narrow;
 pub mod output;
 pub mod pairs;
 #[cfg(feature = "bevy")]

@@ -11,7 +11,7 @@
 //! # The method
 //! Each substep of length `h` runs an event loop per marble (`t` from 0 to `h`):
 //!
-//! 1. **Touches at `t`.** The pieces the marble touches ([`crate::narrow::gather`]).
+//! 1. **Touches at `t`.** The pieces the marble touches ([`crate::board_contact::gather`]).
 //! 2. **Velocity response.** For each touch, the normal closing speed
 //!    `u_n = (v − v_b(p))·n` decides (the seed's 衝突 / 接触): `u_n < −threshold` is a
 //!    *collision* and gets equation (1) — the board's velocity taken at the contact point,
@@ -30,7 +30,7 @@
 //!    surface exactly (`s = ½ g sinθ t²` with Verlet).
 //! 4. **Continuous collision** (`ccd`): the earliest impact along the marble's path (the
 //!    exact parabola of its integrator's *path velocity*, see [`Integrator`]) with a piece
-//!    not touched yet ([`crate::narrow::earliest_impact`]); advance to it and go to 1.
+//!    not touched yet ([`crate::board_contact::earliest_impact`]); advance to it and go to 1.
 //!    Without `ccd`, or when no impact remains, integrate to `h`.
 //! 5. **End of substep.** Any penetration left (boards that turned into the marble, marbles
 //!    spawned inside a board, or every impact when `ccd` is off) is resolved by the same
@@ -67,7 +67,7 @@
 //! ([`resolve_resting`]; [`resolve_rolling`] for a marble that spins, when no friction
 //! event falls inside the substep): the response, the constrained (and frictional)
 //! accelerations and the exact path to the substep's end, with no search (see
-//! [`crate::narrow`], "Near pieces"). Unit tests check that both give the loop's bits.
+//! [`crate::board_contact`], "Near pieces"). Unit tests check that both give the loop's bits.
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever finishes the substep as without continuous collision: its
@@ -77,12 +77,12 @@
 
 use glam::Vec3;
 
-use crate::components::{Contact, ContactKind, Contacts};
-use crate::config::Integrator;
-use crate::narrow::{
+use crate::board_contact::{
     BoardSnapshot, MAX_TOUCHES, Material, NearPieces, Path, Touch, TouchList, earliest_impact,
     gather,
 };
+use crate::components::{Contact, ContactKind, Contacts};
+use crate::config::Integrator;
 
 /// The settings of one substep, copied out of [`crate::config::StepConfig`].
 #[derive(Clone, Copy, Debug)]
@@ -212,7 +212,7 @@ fn resolve_with<const SPINS: bool>(
     touches: &mut TouchList,
     contacts: &mut Contacts,
 ) -> MarbleOut {
-    let tol = crate::narrow::touch_tolerance(p.tolerance, m.r, m.x0);
+    let tol = crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0);
     let sep = separation_speed(p.threshold);
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut t = 0.0f32;

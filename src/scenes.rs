@@ -175,7 +175,7 @@ pub fn pour_box(n: usize) -> Scene {
         // take out; at 1/480 s with 15 (over-relaxed) solver passes the pile settles, with
         // overlaps at the 0.2% slop: in each of fifteen starts the last marble above 5 cm/s
         // stopped by 4.8 s, and from 6 s to 9 s none moved faster than about 1 mm/s
-        // (measured with `examples/marble_pile.rs`; README, "Many marbles").
+        // (measured with `examples/marble_pile.rs`; `docs/pair-solver.md`, "What piles need").
         substeps: 8,
         solver_iterations: 15,
         duration: 5.0,

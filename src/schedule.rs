@@ -3,17 +3,18 @@
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::{LogLevel, ScheduleBuildSettings, ScheduleLabel};
 
-use crate::config::{StepConfig, SubstepCounter};
-use crate::sleep;
-use crate::systems::{boards, collide, detect, forces, integrate, respond};
+use crate::config::{StepConfig, Substep};
+use crate::systems::{board_detection, board_response, boards, forces, integrate, pairs, sleep};
 
 /// The schedule that runs one substep. A step runs it `substeps` times
 /// ([`run_step`]).
 #[derive(ScheduleLabel, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct MarbleSubstep;
 
-/// The stages of a substep, in order. Add your own systems to the physics with
-/// `.in_set(MarbleSystems::…)` or order them `.before`/`.after` a stage.
+/// The stages of a substep, in order: the one place where the order is fixed. Stages
+/// named `Board…` are marble–board work, `Pair…` marble–marble work. Add your own systems
+/// to the physics with `.in_set(MarbleSystems::…)` or order them `.before`/`.after` a
+/// stage.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum MarbleSystems {
     /// Snapshot every board's pose and motion for the substep; on the first substep, wake
@@ -21,17 +22,20 @@ pub enum MarbleSystems {
     PrepareBoards,
     /// Gravity plus user forces → acceleration.
     AccumulateForces,
-    /// Marble–marble contacts: collisions of touching pairs, contact forces, overlap
-    /// (only with `marble_collisions` on).
-    MarbleContacts,
+    /// Marble–marble pairs touching at the substep's start: collisions, friction, contact
+    /// forces, overlap (only with `marble_collisions` on).
+    PairContacts,
     /// Free motion with the chosen integrator.
     Integrate,
-    /// Touches (collision or contact), first impact, or end overlap.
-    DetectContacts,
-    /// Equation (1), contacts, continuous collision, position correction.
-    Respond,
-    /// Marble–marble collisions and contacts (only with `marble_collisions` on).
-    CollideMarbles,
+    /// Marble–board touches (collision or contact), first impact, or end overlap; the
+    /// closed forms of a marble alone on one piece.
+    BoardDetection,
+    /// Marble–board response: equation (1), contacts, continuous collision, position
+    /// correction.
+    BoardResponse,
+    /// Marble–marble pairs that meet inside the substep collide at their time of impact
+    /// (only with `marble_collisions` on).
+    PairImpacts,
     /// Kinematic boards advance.
     MoveBoards,
     /// Last substep only: with sleeping on, put to sleep the groups that have been slow
@@ -58,11 +62,11 @@ pub fn substep_schedule() -> Schedule {
         (
             MarbleSystems::PrepareBoards,
             MarbleSystems::AccumulateForces,
-            MarbleSystems::MarbleContacts,
+            MarbleSystems::PairContacts,
             MarbleSystems::Integrate,
-            MarbleSystems::DetectContacts,
-            MarbleSystems::Respond,
-            MarbleSystems::CollideMarbles,
+            MarbleSystems::BoardDetection,
+            MarbleSystems::BoardResponse,
+            MarbleSystems::PairImpacts,
             MarbleSystems::MoveBoards,
             MarbleSystems::Finish,
         )
@@ -77,21 +81,24 @@ pub fn substep_schedule() -> Schedule {
             .in_set(MarbleSystems::PrepareBoards),
         forces::accumulate_forces.in_set(MarbleSystems::AccumulateForces),
         integrate::integrate.in_set(MarbleSystems::Integrate),
-        (detect::detect_contacts, detect::detect_contacts_spinning)
-            .in_set(MarbleSystems::DetectContacts),
         (
-            respond::respond,
-            respond::respond_spinning,
+            board_detection::detect_board_contacts,
+            board_detection::detect_board_contacts_spinning,
+        )
+            .in_set(MarbleSystems::BoardDetection),
+        (
+            board_response::respond_to_boards,
+            board_response::respond_to_boards_spinning,
             boards::rotate_marbles.run_if(|c: Res<StepConfig>| c.rolling),
         )
             .chain()
-            .in_set(MarbleSystems::Respond),
-        collide::marble_contacts
+            .in_set(MarbleSystems::BoardResponse),
+        pairs::pair_contacts
             .run_if(|c: Res<StepConfig>| c.marble_collisions)
-            .in_set(MarbleSystems::MarbleContacts),
-        collide::collide_marbles
+            .in_set(MarbleSystems::PairContacts),
+        pairs::pair_impacts
             .run_if(|c: Res<StepConfig>| c.marble_collisions)
-            .in_set(MarbleSystems::CollideMarbles),
+            .in_set(MarbleSystems::PairImpacts),
         (
             boards::move_boards,
             boards::advance_tilt.run_if(resource_exists::<crate::config::GravityTilt>),
@@ -117,25 +124,27 @@ pub fn init_resources(world: &mut World) {
     #[cfg(feature = "parallel")]
     bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
     world.init_resource::<StepConfig>();
-    world.init_resource::<SubstepCounter>();
-    world.init_resource::<crate::narrow::BoardCache>();
+    world.init_resource::<Substep>();
+    world.init_resource::<crate::board_contact::BoardCache>();
     world.init_resource::<crate::pairs::PairSolver>();
     world.init_resource::<crate::pairs::MarbleContacts>();
     world.init_resource::<crate::sleep::SleepState>();
 }
 
 /// Runs one step: `substeps` runs of the substep schedule through `run_substep`; only
-/// the first when its [`crate::sleep::wake`] found a still world (every marble asleep,
+/// the first when its [`crate::systems::sleep::wake`] found a still world (every marble asleep,
 /// none woken, no board moving, gravity not turning: [`SleepState::is_idle`]), whose
 /// other substeps would do nothing. Systems added to [`MarbleSubstep`] then run once in
 /// that step, and those of the last substep ([`MarbleSystems::Finish`], or run if
-/// [`SubstepCounter::is_last`]) not at all.
+/// [`Substep::is_last`]) not at all. It sets the [`Substep`] resource before each
+/// substep.
 ///
 /// [`SleepState::is_idle`]: crate::sleep::SleepState::is_idle
 pub fn run_step(world: &mut World, mut run_substep: impl FnMut(&mut World)) {
-    let count = world.resource::<StepConfig>().substeps.max(1);
+    let config = world.resource::<StepConfig>();
+    let (h, count) = (config.substep_dt(), config.substeps.max(1));
     for index in 0..count {
-        *world.resource_mut::<SubstepCounter>() = SubstepCounter { index, count };
+        *world.resource_mut::<Substep>() = Substep { h, index, count };
         run_substep(world);
         if world
             .get_resource::<crate::sleep::SleepState>()

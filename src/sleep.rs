@@ -51,26 +51,26 @@
 //! within a step; it is then woken at the next step, overlapping, and the contact stage
 //! pushes the two apart. The tests in `tests/sleep.rs` check when marbles fall asleep,
 //! that a settled pile asleep stays bit for bit where it is, and each way of waking.
-
 use bevy_ecs::prelude::*;
 use glam::{Vec3, Vec4};
 use parry3d::bounding_volume::Aabb;
 
-use crate::components::{
-    AngularVelocity, Contacts, Force, Marble, Mass, Position, Quarantined, Radius, Velocity,
-};
-use crate::config::{GravityTilt, Sleep, StepConfig, SubstepCounter};
-use crate::narrow::{BoardCache, BoardSnapshot};
-use crate::pairs::{Grid, KeyMap, PairSolver};
+#[cfg(doc)]
+use crate::components::Quarantined;
+#[cfg(doc)]
+use crate::config::{GravityTilt, Sleep, StepConfig};
+use crate::pairs::{Grid, KeyMap};
+#[cfg(doc)]
+use crate::systems::sleep::{fall_asleep, wake};
 
 /// A marble asleep: every stage skips it until something wakes it (module docs). Remove
 /// it to wake the marble by hand.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
 pub struct Sleeping {
     /// Where the marble fell asleep: moved elsewhere, it wakes.
-    position: Vec3,
+    pub(crate) position: Vec3,
     /// Its radius then: given another, it wakes.
-    radius: f32,
+    pub(crate) radius: f32,
 }
 
 impl Sleeping {
@@ -84,79 +84,43 @@ impl Sleeping {
 /// that looks at it with sleeping on.
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct Drowsy(pub f32);
-
-/// How far from its centre a marble could reach during a step of `dt` (module docs): its
-/// radius, one more radius, and its free path's farthest point at its speed `v` raised by
-/// the fastest knock `knock` a collision could give it.
-#[inline]
-fn reach(r: f32, v: Vec3, a: Vec3, knock: f32, dt: f32) -> f32 {
-    2.0 * r + (v.length() + knock) * dt + 0.5 * a.length() * dt * dt
-}
-
-/// The fastest knock a collision could give a marble this step: twice the fastest awake
-/// marble's speed `fastest` plus the fastest board surface (module docs).
-fn knock(fastest: f32, boards: &[BoardSnapshot]) -> f32 {
-    let board = boards
-        .iter()
-        .map(|b| {
-            // A turning plane (unbounded) wakes every marble anyway.
-            let turn = b.angular_velocity.length() * b.reach;
-            b.velocity.length() + if turn.is_finite() { turn } else { 0.0 }
-        })
-        .fold(0.0f32, f32::max);
-    2.0 * (fastest + board)
-}
-
-/// Whether one of the boards that reach marbles this step (`reaching`: swept bounds,
-/// `None` for unbounded, and the distance they move on) comes within a radius of a marble
-/// of radius `r` at `x`.
-fn reached_by_board(reaching: &[(Option<Aabb>, f32)], x: Vec3, r: f32) -> bool {
-    reaching.iter().any(|(aabb, sweep)| {
-        aabb.is_none_or(|a| {
-            let margin = Vec3::splat(sweep + 2.0 * r);
-            let (lo, hi) = (a.mins - margin, a.maxs + margin);
-            x.cmpge(lo).all() && x.cmple(hi).all()
-        })
-    })
-}
-
 /// The sleep stages' state (a resource): the sleeping marbles' spheres in a grid, what
 /// the boards and gravity were at the last step, and reusable buffers.
 #[derive(Resource, Default, Debug)]
 pub struct SleepState {
     /// The sleeping marbles' spheres (centre, radius) and entities.
-    spheres: Vec<Vec4>,
-    entities: Vec<Entity>,
-    grid: Grid,
+    pub(crate) spheres: Vec<Vec4>,
+    pub(crate) entities: Vec<Entity>,
+    pub(crate) grid: Grid,
     /// Boards that reach marbles this step: swept bounds (`None`: unbounded) and the
     /// distance they move on over the rest of the step; and of those, the boards that move.
-    reaching: Vec<(Option<Aabb>, f32)>,
-    moving: Vec<(Option<Aabb>, f32)>,
+    pub(crate) reaching: Vec<(Option<Aabb>, f32)>,
+    pub(crate) moving: Vec<(Option<Aabb>, f32)>,
     /// Gravity as the marbles saw it at the last step.
-    gravity: Option<Vec3>,
+    pub(crate) gravity: Option<Vec3>,
     /// The board cache's epoch at the last step.
-    epoch: u32,
+    pub(crate) epoch: u32,
     /// Each board's entity, pose version and swept bounds at the last step.
-    poses: Vec<(Entity, u32, Option<Aabb>)>,
+    pub(crate) poses: Vec<(Entity, u32, Option<Aabb>)>,
     /// Sleeping marbles woken this step (indices into `spheres`) and the search queue.
-    woken: Vec<bool>,
-    queue: Vec<u32>,
+    pub(crate) woken: Vec<bool>,
+    pub(crate) queue: Vec<u32>,
     /// The awake marbles' reach spheres (centre, reach), their union–find parents and
     /// whether each is ready to sleep, at the end of a step.
-    bounds: Vec<Vec4>,
-    parent: Vec<u32>,
-    ready: Vec<bool>,
-    group_ready: Vec<bool>,
+    pub(crate) bounds: Vec<Vec4>,
+    pub(crate) parent: Vec<u32>,
+    pub(crate) ready: Vec<bool>,
+    pub(crate) group_ready: Vec<bool>,
     /// The sleeping marbles' contact impulses, kept for when they wake, and the entity
     /// bits of the marbles falling asleep or waking (sorted).
-    impulses: KeyMap,
-    keys: Vec<u64>,
+    pub(crate) impulses: KeyMap,
+    pub(crate) keys: Vec<u64>,
     /// Set by [`wake`]: every marble sleeps, nothing woke, no board moves and gravity
     /// holds still, so the rest of the step's substeps would do nothing ([`run_step`]
     /// skips them).
     ///
     /// [`run_step`]: crate::schedule::run_step
-    idle: bool,
+    pub(crate) idle: bool,
 }
 
 impl SleepState {
@@ -165,385 +129,4 @@ impl SleepState {
     pub fn is_idle(&self) -> bool {
         self.idle
     }
-}
-
-/// Run condition: sleeping is on.
-pub fn sleep_on(config: Res<StepConfig>) -> bool {
-    config.sleep.is_some()
-}
-
-/// Run condition: the first substep of a step.
-pub fn first_substep(counter: Res<SubstepCounter>) -> bool {
-    counter.index == 0
-}
-
-/// Gravity as the marbles see it (turned back by a [`GravityTilt`]).
-fn seen_gravity(config: &StepConfig, tilt: Option<&GravityTilt>) -> Vec3 {
-    tilt.map_or(config.gravity, |t| t.gravity(config.gravity))
-}
-
-/// True while gravity turns every step.
-fn gravity_turns(tilt: Option<&GravityTilt>) -> bool {
-    tilt.is_some_and(|t| t.angular_velocity != Vec3::ZERO)
-}
-
-/// A sleeping marble the program has given a velocity, spin or force, moved or resized.
-fn changed_by_program(
-    sleeping: &Sleeping,
-    (position, velocity, force, radius): (&Position, &Velocity, &Force, &Radius),
-    spin: Option<&AngularVelocity>,
-) -> bool {
-    position.0 != sleeping.position
-        || radius.0 != sleeping.radius
-        || velocity.0 != Vec3::ZERO
-        || force.0 != Vec3::ZERO
-        || spin.is_some_and(|w| w.0 != Vec3::ZERO)
-}
-
-/// First substep of each step, after the boards' snapshot: wakes the sleeping marbles that
-/// something reaches (module docs, "Waking"); with sleeping off, wakes every sleeping
-/// marble. Runs with sleeping off too, so that marbles asleep when it was turned off
-/// wake; it stops at once when none sleeps.
-pub fn wake(
-    mut commands: Commands,
-    (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
-    (mut state, mut solver): (ResMut<SleepState>, ResMut<PairSolver>),
-    mut removed: RemovedComponents<Sleeping>,
-    mut sleepers: Query<
-        (
-            Entity,
-            &Sleeping,
-            (&Position, &Velocity, &Force, &Radius),
-            &Mass,
-            &mut Contacts,
-            Option<&AngularVelocity>,
-            Option<&mut Drowsy>,
-        ),
-        (With<Marble>, Without<Quarantined>),
-    >,
-    mut awake: Query<
-        (
-            &Position,
-            &Velocity,
-            &Force,
-            &Mass,
-            &Radius,
-            Option<&mut Drowsy>,
-        ),
-        (With<Marble>, Without<Sleeping>, Without<Quarantined>),
-    >,
-    changed: Query<
-        (
-            &Sleeping,
-            (&Position, &Velocity, &Force, &Radius),
-            Option<&AngularVelocity>,
-        ),
-        (
-            With<Marble>,
-            Without<Quarantined>,
-            Or<(
-                Changed<Position>,
-                Changed<Velocity>,
-                Changed<Force>,
-                Changed<Radius>,
-                Changed<AngularVelocity>,
-            )>,
-        ),
-    >,
-) {
-    // A marble whose `Sleeping` went (woken here last step, or by the program) starts its
-    // slow time again, and one the program woke gets its contact impulses back.
-    let state = state.as_mut();
-    state.idle = false;
-    state.keys.clear();
-    for entity in removed.read() {
-        if let Ok((.., Some(mut drowsy))) = awake.get_mut(entity) {
-            drowsy.0 = 0.0;
-        }
-        state.keys.push(entity.to_bits());
-    }
-    if !state.keys.is_empty() && !state.impulses.is_empty() {
-        state.keys.sort_unstable();
-        solver.restore_impulses(&state.keys, &mut state.impulses);
-    }
-    if config.sleep.is_none() {
-        state.gravity = None;
-        state.poses.clear();
-        state.keys.clear();
-        for (entity, .., drowsy) in &mut sleepers {
-            commands.entity(entity).remove::<Sleeping>();
-            state.keys.push(entity.to_bits());
-            if let Some(mut drowsy) = drowsy {
-                drowsy.0 = 0.0;
-            }
-        }
-        state.keys.sort_unstable();
-        solver.restore_impulses(&state.keys, &mut state.impulses);
-        return;
-    }
-    let g = seen_gravity(&config, tilt.as_deref());
-    let gravity_changed =
-        state.gravity.is_some_and(|old| old != g) || gravity_turns(tilt.as_deref());
-    state.gravity = Some(g);
-    // Boards that move, turn, or were moved since the last step: their swept bounds, and
-    // where a moved board was (`None`: unbounded, it reaches everything). A board added,
-    // removed or reshaped reaches everything.
-    let dt = config.dt;
-    state.reaching.clear();
-    state.moving.clear();
-    let mut rearranged = cache.epoch != state.epoch;
-    if rearranged {
-        state.reaching.push((None, 0.0));
-    }
-    for b in &cache.boards {
-        let last = state.poses.iter().find(|p| p.0 == b.entity);
-        let moved = last.is_some_and(|p| p.1 != b.pose_version);
-        if b.is_moving() || moved {
-            // The snapshot sweeps one substep; the board moves on for the rest of the step.
-            let sweep = (b.velocity.length() + b.angular_velocity.length() * b.reach) * dt;
-            state.reaching.push((b.swept_aabb, sweep));
-            if b.is_moving() {
-                state.moving.push((b.swept_aabb, sweep));
-            }
-        }
-        if let Some(&(_, _, before)) = last.filter(|_| moved) {
-            state.reaching.push((before, 0.0));
-            rearranged = true;
-        }
-    }
-    state.epoch = cache.epoch;
-    state.poses.clear();
-    state.poses.extend(
-        cache
-            .boards
-            .iter()
-            .map(|b| (b.entity, b.pose_version, b.swept_aabb)),
-    );
-    let n = sleepers.iter().len();
-    if n == 0 {
-        return;
-    }
-    // The stages never write to a sleeping marble, so only one the program changed since
-    // the last step can have woken by itself; with no board, no gravity and no awake
-    // marble to reach the others, a still world stops here.
-    let reached = gravity_changed
-        || !state.reaching.is_empty()
-        || (config.marble_collisions && !awake.is_empty());
-    if !reached
-        && !changed
-            .iter()
-            .any(|(sleeping, state, spin)| changed_by_program(sleeping, state, spin))
-    {
-        // Nothing reached a sleeper (so no board moves and gravity holds); with no marble
-        // awake either, the step has nothing left to do.
-        state.idle = awake.is_empty();
-        return;
-    }
-    // Every sleeping marble, in query order, with what wakes it by itself.
-    state.spheres.clear();
-    state.entities.clear();
-    state.woken.clear();
-    state.queue.clear();
-    let mut fastest = 0.0f32;
-    for (entity, sleeping, marble, _, _, spin, _) in &sleepers {
-        let (position, velocity, _, radius) = marble;
-        let k = state.spheres.len() as u32;
-        state.spheres.push(position.0.extend(radius.0));
-        state.entities.push(entity);
-        let wakes = gravity_changed
-            || changed_by_program(sleeping, marble, spin)
-            || reached_by_board(&state.reaching, position.0, radius.0);
-        state.woken.push(wakes);
-        if wakes {
-            state.queue.push(k);
-            fastest = fastest.max(velocity.0.length());
-        }
-    }
-    if config.marble_collisions && (!awake.is_empty() || !state.queue.is_empty()) {
-        // Awake marbles that could reach a sleeping one during the step, and the marbles
-        // within reach of every marble that wakes.
-        for (_, velocity, ..) in &awake {
-            fastest = fastest.max(velocity.0.length());
-        }
-        let knock = knock(fastest, &cache.boards);
-        state.grid.reserve(n);
-        let (grid, spheres) = (&mut state.grid, &state.spheres);
-        grid.build(spheres);
-        for (position, velocity, force, mass, radius, _) in &awake {
-            let a = g + force.0 * mass.inverse();
-            let probe = position.0.extend(reach(radius.0, velocity.0, a, knock, dt));
-            grid.query(spheres, probe, |k| {
-                if !state.woken[k as usize] {
-                    state.woken[k as usize] = true;
-                    state.queue.push(k);
-                }
-            });
-        }
-        let mut head = 0;
-        while head < state.queue.len() {
-            let k = state.queue[head] as usize;
-            head += 1;
-            let Ok((_, _, (_, velocity, force, radius), mass, ..)) =
-                sleepers.get(state.entities[k])
-            else {
-                continue;
-            };
-            let a = g + force.0 * mass.inverse();
-            let probe = spheres[k]
-                .truncate()
-                .extend(reach(radius.0, velocity.0, a, knock, dt));
-            grid.query(spheres, probe, |k| {
-                if !state.woken[k as usize] {
-                    state.woken[k as usize] = true;
-                    state.queue.push(k);
-                }
-            });
-        }
-    }
-    state.keys.clear();
-    for &k in &state.queue {
-        let entity = state.entities[k as usize];
-        commands.entity(entity).remove::<Sleeping>();
-        state.keys.push(entity.to_bits());
-        if let Ok((.., mut contacts, _, drowsy)) = sleepers.get_mut(entity) {
-            if let Some(mut drowsy) = drowsy {
-                drowsy.0 = 0.0;
-            }
-            // Contacts kept from before a board moved, came or went may be gone.
-            if rearranged {
-                contacts.clear();
-            }
-        }
-    }
-    state.keys.sort_unstable();
-    solver.restore_impulses(&state.keys, &mut state.impulses);
-}
-
-/// Last substep of each step, before the forces are cleared: adds the step to each slow
-/// marble's [`Drowsy`] time and puts to sleep every group whose marbles have all been slow
-/// for [`Sleep::time`] (module docs, "Falling asleep").
-pub fn fall_asleep(
-    mut commands: Commands,
-    (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
-    (mut state, solver): (ResMut<SleepState>, Res<PairSolver>),
-    mut marbles: Query<
-        (
-            Entity,
-            (&Position, &mut Velocity, &Force, &Mass, &Radius),
-            &Contacts,
-            Option<&mut AngularVelocity>,
-            Option<&mut Drowsy>,
-        ),
-        (With<Marble>, Without<Sleeping>, Without<Quarantined>),
-    >,
-) {
-    let Some(Sleep { speed, time }) = config.sleep else {
-        return;
-    };
-    let state = state.as_mut();
-    let dt = config.dt;
-    let g = seen_gravity(&config, tilt.as_deref());
-    // Nothing is slow while gravity turns.
-    let turning = gravity_turns(tilt.as_deref());
-    let mut any = false;
-    let mut fastest = 0.0f32;
-    state.ready.clear();
-    for (entity, (position, velocity, force, _, radius), contacts, spin, drowsy) in &mut marbles {
-        fastest = fastest.max(velocity.0.length());
-        let spin_speed = spin.as_ref().map_or(0.0, |w| w.0.length() * radius.0);
-        let on_moving_board = contacts.iter().any(|c| {
-            cache
-                .boards
-                .get(c.piece.board())
-                .is_some_and(|b| b.is_moving())
-        });
-        let slow = !turning
-            && velocity.0.length() < speed
-            && spin_speed < speed
-            && force.0 == Vec3::ZERO
-            && !on_moving_board
-            // A moving board that would wake it next step.
-            && !reached_by_board(&state.moving, position.0, radius.0);
-        let t = match drowsy {
-            Some(mut d) => {
-                d.0 = if slow { d.0 + dt } else { 0.0 };
-                d.0
-            }
-            None => {
-                let t = if slow { dt } else { 0.0 };
-                commands.entity(entity).insert(Drowsy(t));
-                t
-            }
-        };
-        // Within half a step of `time`: the sum of f32 steps may fall short of it by a
-        // rounding.
-        let ready = t >= time - 0.5 * dt;
-        any |= ready;
-        state.ready.push(ready);
-    }
-    if !any {
-        return;
-    }
-    // Groups: union–find over the pairs within each other's reach.
-    let knock = knock(fastest, &cache.boards);
-    state.bounds.clear();
-    for (_, (position, velocity, force, mass, radius), ..) in &marbles {
-        let a = g + force.0 * mass.inverse();
-        state
-            .bounds
-            .push(position.0.extend(reach(radius.0, velocity.0, a, knock, dt)));
-    }
-    let n = state.bounds.len();
-    state.parent.clear();
-    state.parent.extend(0..n as u32);
-    fn root(parent: &mut [u32], mut k: u32) -> u32 {
-        while parent[k as usize] != k {
-            let up = parent[parent[k as usize] as usize];
-            parent[k as usize] = up;
-            k = up;
-        }
-        k
-    }
-    if config.marble_collisions {
-        state.grid.reserve(n);
-        state.grid.build(&state.bounds);
-        let (grid, parent) = (&state.grid, &mut state.parent);
-        grid.pairs(&state.bounds, |a, b| {
-            let (ra, rb) = (root(parent, a), root(parent, b));
-            if ra != rb {
-                parent[ra.max(rb) as usize] = ra.min(rb);
-            }
-        });
-    }
-    // A group is ready when every one of its marbles is: clear the roots of groups with
-    // a marble that is not.
-    state.group_ready.clear();
-    state.group_ready.resize(n, true);
-    for k in 0..n {
-        if !state.ready[k] {
-            let r = root(&mut state.parent, k as u32);
-            state.group_ready[r as usize] = false;
-        }
-    }
-    state.keys.clear();
-    for (k, (entity, (position, mut velocity, _, _, radius), _, spin, _)) in
-        (0usize..).zip(&mut marbles)
-    {
-        let r = root(&mut state.parent, k as u32);
-        if !(state.ready[k] && state.group_ready[r as usize]) {
-            continue;
-        }
-        state.keys.push(entity.to_bits());
-        velocity.0 = Vec3::ZERO;
-        if let Some(mut spin) = spin {
-            spin.0 = Vec3::ZERO;
-        }
-        commands.entity(entity).insert(Sleeping {
-            position: position.0,
-            radius: radius.0,
-        });
-    }
-    // Their contact impulses, for warm starting them when they wake.
-    state.keys.sort_unstable();
-    solver.stow_impulses(&state.keys, &mut state.impulses);
 }

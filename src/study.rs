@@ -1,7 +1,7 @@
 //! Reference scenes with exact answers, and the speed-versus-accuracy study behind
 //! `marble tradeoff`.
 //!
-//! Each [`Reference`] is a small scene whose exact outcome PHYSICS.md gives in closed form;
+//! Each [`Reference`] is a small scene whose exact outcome `docs/PHYSICS.md` §8 gives in closed form;
 //! [`Reference::measure`] runs it under one [`Setting`] (integrator, dt, substeps, CCD) and
 //! returns the error against that answer. [`cost`] measures what the setting costs on many
 //! marbles. [`run`] sweeps a grid of settings and returns the table the CLI prints and plots.

@@ -4,18 +4,18 @@ use bevy_ecs::prelude::*;
 use glam::{Quat, Vec3};
 use parry3d::bounding_volume::Aabb;
 
+use crate::board_contact::{BoardCache, BoardSnapshot};
 use crate::components::{
     AngularVelocity, Board, Collider, Friction, Position, Restitution, RollingResistance, Rotation,
     SpinDamping, Velocity,
 };
-use crate::config::StepConfig;
+use crate::config::Substep;
 use crate::geometry::transform_aabb;
-use crate::narrow::{BoardCache, BoardSnapshot};
 
 /// Snapshots every board (pose, motion, bounds swept over the substep) into
 /// [`BoardCache`], reusing its storage.
 pub fn prepare_boards(
-    config: Res<StepConfig>,
+    substep: Res<Substep>,
     mut cache: ResMut<BoardCache>,
     boards: Query<
         (
@@ -33,9 +33,8 @@ pub fn prepare_boards(
         With<Board>,
     >,
 ) {
-    let h = config.substep_dt();
+    let h = substep.h;
     let cache = cache.as_mut();
-    cache.h = h;
     cache.boards.clear();
     for (
         entity,
@@ -89,10 +88,10 @@ pub fn prepare_boards(
 
 /// Advances every board by its linear and angular velocity over the substep.
 pub fn move_boards(
-    cache: Res<BoardCache>,
+    substep: Res<Substep>,
     mut boards: Query<(&mut Position, &mut Rotation, &Velocity, &AngularVelocity), With<Board>>,
 ) {
-    let h = cache.h;
+    let h = substep.h;
     for (mut position, mut rotation, velocity, angular) in &mut boards {
         if velocity.0 != Vec3::ZERO {
             position.0 += velocity.0 * h;
@@ -106,13 +105,13 @@ pub fn move_boards(
 /// Turns every spinning marble's [`Rotation`] by its angular velocity over the substep
 /// (runs only when rolling is modelled).
 pub fn rotate_marbles(
-    cache: Res<BoardCache>,
+    substep: Res<Substep>,
     mut marbles: Query<
         (&mut Rotation, &AngularVelocity),
         (With<crate::components::Marble>, Without<Board>),
     >,
 ) {
-    let h = cache.h;
+    let h = substep.h;
     for (mut rotation, angular) in &mut marbles {
         if angular.0 != Vec3::ZERO {
             rotation.0 = (Quat::from_scaled_axis(angular.0 * h) * rotation.0).normalize();
@@ -122,8 +121,8 @@ pub fn rotate_marbles(
 
 /// Advances the [`GravityTilt`](crate::config::GravityTilt) of a scene that models its
 /// turning board by turning gravity (runs only when there is one).
-pub fn advance_tilt(cache: Res<BoardCache>, mut tilt: ResMut<crate::config::GravityTilt>) {
-    let h = cache.h;
+pub fn advance_tilt(substep: Res<Substep>, mut tilt: ResMut<crate::config::GravityTilt>) {
+    let h = substep.h;
     let tilt = tilt.as_mut();
     tilt.rotation = (Quat::from_scaled_axis(tilt.angular_velocity * h) * tilt.rotation).normalize();
 }

@@ -3,7 +3,7 @@
 use bevy_ecs::prelude::*;
 
 use crate::components::{Acceleration, Force, Marble, Mass, Position, Quarantined, Velocity};
-use crate::config::{GravityTilt, StepConfig, SubstepCounter};
+use crate::config::{GravityTilt, StepConfig, Substep};
 use crate::sleep::Sleeping;
 
 /// Acceleration of every marble for this substep: `gravity + Force / mass` (gravity turned
@@ -23,8 +23,8 @@ pub fn accumulate_forces(
 }
 
 /// Run condition: true during the last substep of a step.
-pub fn last_substep(counter: Res<SubstepCounter>) -> bool {
-    counter.is_last()
+pub fn last_substep(substep: Res<Substep>) -> bool {
+    substep.is_last()
 }
 
 /// Clears every marble's [`Force`] once the whole step has integrated it.

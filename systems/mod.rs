@@ -2,18 +2,86 @@
 //!
 //! The order lives in one place, [`crate::schedule::MarbleSystems`]; each stage here is a
 //! set of plain `pub fn` systems that can be run on a raw `World` with a `Schedule`.
+//! Stages named `Board…` are marble–board work, stages named `Pair…` marble–marble work.
 //!
 //! | stage | file | does |
 //! | --- | --- | --- |
-//! | `PrepareBoards` | `boards.rs`, `src/sleep.rs` | snapshots every board's pose and motion for the substep; on the first substep, with sleeping on, wakes the sleeping marbles something reaches |
+//! | `PrepareBoards` | `boards.rs`, `sleep.rs` | snapshots every board's pose and motion for the substep; on the first substep, with sleeping on, wakes the sleeping marbles something reaches |
 //! | `AccumulateForces` | `forces.rs` | acceleration = gravity + force / mass |
-//! | `MarbleContacts` | `collide.rs` | touching marble pairs: collisions at the start, friction, contact forces, overlap (only with `marble_collisions`) |
+//! | `PairContacts` | `pairs.rs` | marble–marble pairs touching at the start: collisions, friction, contact forces, overlap (only with `marble_collisions`) |
 //! | `Integrate` | `integrate.rs` | free motion over the substep with the chosen integrator |
-//! | `DetectContacts` | `detect.rs` | touches at the start (collision or contact), else the first impact (CCD) or the end overlap; marbles resting, sliding or rolling on one piece with nothing else near are resolved here (in closed form on a still board, unless a spinning marble's friction event falls inside the substep; by the event loop on that touch otherwise) |
-//! | `Respond` | `respond.rs` | impacts and contacts of the marbles detection flagged |
-//! | `CollideMarbles` | `collide.rs` | marble pairs that meet inside the substep collide at their time of impact (only with `marble_collisions`) |
+//! | `BoardDetection` | `board_detection.rs` | marble–board touches at the start (collision or contact), else the first impact (CCD) or the end overlap; marbles resting, sliding or rolling on one piece with nothing else near are resolved here (in closed form on a still board, unless a spinning marble's friction event falls inside the substep; by the event loop on that touch otherwise) |
+//! | `BoardResponse` | `board_response.rs` | the marble–board event loop for the marbles detection flagged: equation (1), contacts, continuous collision |
+//! | `PairImpacts` | `pairs.rs` | marble–marble pairs that meet inside the substep collide at their time of impact (only with `marble_collisions`) |
 //! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities |
-//! | `Finish` | `forces.rs`, `src/sleep.rs` | on the last substep: clear forces, quarantine non-finite marbles; with sleeping on, put to sleep the groups that have been slow long enough |
+//! | `Finish` | `forces.rs`, `sleep.rs` | on the last substep: clear forces, quarantine non-finite marbles; with sleeping on, put to sleep the groups that have been slow long enough |
+
+use bevy_ecs::prelude::*;
+use bevy_ecs::query::QueryData;
+
+use crate::board_contact::{Material, NearPieces};
+use crate::components::{
+    Acceleration, AngularVelocity, Contacts, Friction, Marble, Position, PositionCarry,
+    Quarantined, Radius, Restitution, RollingResistance, SpinDamping, StepStart, Velocity,
+};
+use crate::sleep::Sleeping;
+
+/// The marbles every per-marble stage steps: awake and not quarantined.
+pub type Stepped = (With<Marble>, Without<Quarantined>, Without<Sleeping>);
+
+/// The marbles that do not spin, which the marble–board stages step without any rolling
+/// code.
+pub type Smooth = (Stepped, Without<AngularVelocity>);
+
+/// What the marble–board stages (detection and response) read and write of every marble.
+#[derive(QueryData)]
+#[query_data(mutable)]
+pub struct BoardStaged {
+    position: &'static mut Position,
+    carry: &'static mut PositionCarry,
+    velocity: &'static mut Velocity,
+    start: &'static StepStart,
+    acceleration: &'static Acceleration,
+    radius: &'static Radius,
+    restitution: &'static Restitution,
+    contacts: &'static mut Contacts,
+    near: &'static mut NearPieces,
+}
+
+/// What the marble–board stages read and write besides [`BoardStaged`] of a marble that
+/// carries an [`AngularVelocity`]: with rolling on it spins, with friction, rolling
+/// resistance and spin damping at its contacts.
+#[derive(QueryData)]
+#[query_data(mutable)]
+pub struct SpinStaged {
+    spin: &'static mut AngularVelocity,
+    friction: &'static Friction,
+    rolling_resistance: Option<&'static RollingResistance>,
+    spin_damping: Option<&'static SpinDamping>,
+}
+
+impl SpinStagedItem<'_, '_> {
+    /// The marble's side of a contact's material, with the restitution `restitution`.
+    #[inline]
+    pub(crate) fn material(&self, restitution: &Restitution) -> Material {
+        Material::of_marble(
+            restitution,
+            self.friction,
+            self.rolling_resistance,
+            self.spin_damping,
+        )
+    }
+}
+
+/// The material of a marble that does not spin: its restitution only (a smooth marble
+/// feels no friction).
+#[inline]
+pub(crate) fn smooth_material(restitution: &Restitution) -> Material {
+    Material {
+        restitution: restitution.0,
+        ..Material::default()
+    }
+}
 
 /// With the `parallel` feature, queries of fewer marbles than this run in order: handing
 /// a few marbles to the task pool costs more than their work (a study of thousands of
@@ -22,7 +90,7 @@
 pub(crate) const PARALLEL_MIN: usize = 1024;
 
 /// Runs `each(&mut touches, item)` for every item of the marble query `query`, with a
-/// scratch [`TouchList`](crate::narrow::TouchList): on bevy's compute task pool with the
+/// scratch [`TouchList`](crate::board_contact::TouchList): on bevy's compute task pool with the
 /// `parallel` feature (one scratch list per batch) when there are at least
 /// [`PARALLEL_MIN`] marbles, in order otherwise. Each marble's work depends on that marble
 /// alone, so both give the same bits.
@@ -36,9 +104,9 @@ macro_rules! for_each_marble {
             #[cfg(feature = "parallel")]
             $query
                 .par_iter_mut()
-                .for_each_init(crate::narrow::TouchList::default, $each);
+                .for_each_init(crate::board_contact::TouchList::default, $each);
         } else {
-            let mut touches = crate::narrow::TouchList::default();
+            let mut touches = crate::board_contact::TouchList::default();
             for item in &mut $query {
                 ($each)(&mut touches, item);
             }
@@ -47,9 +115,10 @@ macro_rules! for_each_marble {
 }
 pub(crate) use for_each_marble;
 
+pub mod board_detection;
+pub mod board_response;
 pub mod boards;
-pub mod collide;
-pub mod detect;
 pub mod forces;
 pub mod integrate;
-pub mod respond;
+pub mod pairs;
+pub mod sleep;

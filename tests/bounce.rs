@@ -1,4 +1,4 @@
-//! The bounce sequence `h_n = e^(2n) h_0` (PHYSICS.md) for several e, every integrator,
+//! The bounce sequence `h_n = e^(2n) h_0` (`docs/PHYSICS.md` §8) for several e, every integrator,
 //! continuous collision on and off; e = 0 stops on the surface; e = 1 keeps its energy.
 
 mod common;

@@ -1,4 +1,4 @@
-//! Stability at the extremes (PHYSICS.md): tiny and huge steps, speeds far beyond
+//! Stability at the extremes (`docs/PHYSICS.md` §9): tiny and huge steps, speeds far beyond
 //! `radius / dt`, restitution 0 and 1, radii and masses over many orders of magnitude,
 //! scenes far from the origin, fast and jerky boards, marbles spawned inside boards, and
 //! millions of steps. The longest runs are `#[ignore]`d here and run in release mode by

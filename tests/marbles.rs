@@ -1,4 +1,4 @@
-//! Marble–marble collisions against exact answers (PHYSICS.md "Two marbles"): head-on
+//! Marble–marble collisions against exact answers (`docs/PHYSICS.md` §6): head-on
 //! impacts for mass ratios 1 to 10⁶, momentum, a Newton's cradle, fast marbles with
 //! continuous collision, and piles that settle (issue 4).
 
@@ -30,7 +30,7 @@ fn marble(x: [f32; 3], v: [f32; 3], mass: f32, e: f32) -> MarbleDesc {
     m
 }
 
-/// PHYSICS.md: `v₁' = (m₁v₁ + m₂v₂ − m₂e(v₁ − v₂)) / (m₁ + m₂)`, and symmetrically.
+/// `docs/PHYSICS.md` §6: `v₁' = (m₁v₁ + m₂v₂ − m₂e(v₁ − v₂)) / (m₁ + m₂)`, and symmetrically.
 fn head_on(m1: f32, v1: f32, m2: f32, v2: f32, e: f32) -> (f32, f32) {
     let (m1, v1, m2, v2, e) = (m1 as f64, v1 as f64, m2 as f64, v2 as f64, e as f64);
     let a = (m1 * v1 + m2 * v2 - m2 * e * (v1 - v2)) / (m1 + m2);

@@ -1,5 +1,5 @@
 //! Marbles that roll (`rolling: true`): spin, Coulomb friction, rolling resistance, against
-//! the exact answers of PHYSICS.md.
+//! the exact answers of `docs/PHYSICS.md` §5 and §8.
 
 use bevy_marble::prelude::*;
 use bevy_marble::scene::PlaneDesc;

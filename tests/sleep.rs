@@ -54,11 +54,9 @@ fn a_resting_marble_sleeps_after_sleep_time_and_stays_put() {
     assert!(asleep(&sim, 0));
 }
 
-/// The substep a step ended on (`SubstepCounter::index`).
+/// The substep a step ended on (`Substep::index`).
 fn last_substep(sim: &Simulation) -> u32 {
-    sim.world()
-        .resource::<bevy_marble::config::SubstepCounter>()
-        .index
+    sim.world().resource::<bevy_marble::config::Substep>().index
 }
 
 /// A still world (every marble asleep, no board moving) runs one substep per step instead
@@ -165,7 +163,7 @@ fn space() -> Scene {
 
 /// A marble shot at a sleeping one, head-on, equal masses, e = 0.5: the sleeping marble
 /// falls asleep at step 32 (the shot is far away then), is woken before the shot reaches
-/// it, and the impact gives PHYSICS.md's two-body answer, `v₁' = (1 − e) u / 2`,
+/// it, and the impact gives the two-body answer of `docs/PHYSICS.md` §6, `v₁' = (1 − e) u / 2`,
 /// `v₂' = (1 + e) u / 2`, within 0.5%.
 #[test]
 fn a_sleeping_marble_is_woken_before_a_marble_hits_it() {
@@ -509,9 +507,9 @@ fn a_settled_pile_sleeps_whole_and_wakes_when_hit() {
     }
     assert_eq!(positions(&sim), settled, "a sleeping pile moved");
 
-    // Woken by the program, the settled pile stays where it is (its contact impulses,
-    // not kept over sleep, build up again within the first substeps): no marble moves by
-    // 1% of r before the whole pile is asleep again, 0.5 s later.
+    // Woken by the program, the settled pile stays where it is (the contact impulses kept
+    // over sleep warm start its first substep): no marble moves by 1% of r before the
+    // whole pile is asleep again, 0.5 s later.
     let marbles = sim.marbles().to_vec();
     for &m in &marbles {
         sim.world_mut().entity_mut(m).remove::<Sleeping>();

@@ -1,18 +1,20 @@
-//! Collision-versus-contact detection (the seed's 衝突 / 接触).
+//! Marble–board detection: collision versus contact (the seed's 衝突 / 接触), the first
+//! impact along the free path, and the closed forms of the commonest case.
 
 use bevy_ecs::prelude::*;
 
-use crate::components::{
-    Acceleration, AngularVelocity, Contact, ContactKind, Contacts, Friction, Marble, Pending,
-    Position, PositionCarry, Quarantined, Radius, Restitution, RollingResistance, SpinDamping,
-    StepStart, Velocity, compensated_add,
+use super::{
+    BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped, smooth_material,
 };
-use crate::config::StepConfig;
-use crate::narrow::{
+use crate::board_contact::{
     BoardCache, Material, NearPieces, Path, TouchList, earliest_impact, gather, touch_tolerance,
 };
+use crate::components::{
+    Acceleration, AngularVelocity, Contact, ContactKind, Contacts, Pending, Position,
+    PositionCarry, StepStart, Velocity, compensated_add,
+};
+use crate::config::{StepConfig, Substep};
 use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting, resolve_rolling};
-use crate::sleep::Sleeping;
 
 /// A rebuilt [`NearPieces`] list reaches this many substeps of the marble's motion beyond
 /// it (within two and eight radii; a marble moving more than four radii a substep gets
@@ -28,133 +30,57 @@ const NEAR_SKIN: f32 = 4.0;
 /// those resting or sliding on one piece with nothing else near ([`resolve_resting`]),
 /// resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
 /// the substep.
-pub fn detect_contacts(
+pub fn detect_board_contacts(
     config: Res<StepConfig>,
+    substep: Res<Substep>,
     cache: Res<BoardCache>,
-    mut marbles: Query<
-        (
-            (Mut<Position>, Mut<PositionCarry>, Mut<Velocity>),
-            &StepStart,
-            &Acceleration,
-            &Radius,
-            &Restitution,
-            (&mut Contacts, &mut NearPieces),
-        ),
-        (
-            With<Marble>,
-            Without<Quarantined>,
-            Without<Sleeping>,
-            Without<AngularVelocity>,
-        ),
-    >,
+    mut marbles: Query<BoardStaged, Smooth>,
 ) {
-    let stage = Stage::new(&config, &cache);
-    let each = |touches: &mut TouchList,
-                (
-        (position, carry, velocity),
-        start,
-        acceleration,
-        radius,
-        restitution,
-        (contacts, near),
-    ): (
-        (Mut<Position>, Mut<PositionCarry>, Mut<Velocity>),
-        &StepStart,
-        &Acceleration,
-        &Radius,
-        &Restitution,
-        (Mut<Contacts>, Mut<NearPieces>),
-    )| {
-        let material = Material {
-            restitution: restitution.0,
-            ..Material::default()
-        };
-        let marble = (position, carry, velocity, None);
+    let stage = Stage::new(&config, &cache, substep.h);
+    let each = |touches: &mut TouchList, m: BoardStagedItem<'_, '_>| {
+        let material = smooth_material(m.restitution);
+        let motion = (m.position, m.carry, m.velocity, None);
         stage.detect(
             touches,
-            marble,
-            start,
-            acceleration,
-            radius.0,
+            motion,
+            m.start,
+            m.acceleration,
+            m.radius.0,
             material,
-            contacts,
-            near,
+            m.contacts,
+            m.near,
         );
     };
     super::for_each_marble!(marbles, each);
 }
 
-/// [`detect_contacts`] for marbles that carry an [`AngularVelocity`]: with rolling on, a
-/// marble rolling on one piece with nothing else near is resolved here by the event loop
-/// on that one touch (friction included). A scene without spinning marbles gives this
-/// system nothing to iterate.
-pub fn detect_contacts_spinning(
+/// [`detect_board_contacts`] for marbles that carry an [`AngularVelocity`]: with rolling
+/// on, a marble rolling on one piece with nothing else near is resolved here by the event
+/// loop on that one touch (friction included). A scene without spinning marbles gives
+/// this system nothing to iterate.
+pub fn detect_board_contacts_spinning(
     config: Res<StepConfig>,
+    substep: Res<Substep>,
     cache: Res<BoardCache>,
-    mut marbles: Query<
-        (
-            (
-                Mut<Position>,
-                Mut<PositionCarry>,
-                Mut<Velocity>,
-                Mut<AngularVelocity>,
-            ),
-            (&StepStart, &Acceleration, &Radius),
-            (
-                &Restitution,
-                &Friction,
-                Option<&RollingResistance>,
-                Option<&SpinDamping>,
-            ),
-            (&mut Contacts, &mut NearPieces),
-        ),
-        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
-    >,
+    mut marbles: Query<(BoardStaged, SpinStaged), Stepped>,
 ) {
-    let stage = Stage::new(&config, &cache);
+    let stage = Stage::new(&config, &cache, substep.h);
     let each = |touches: &mut TouchList,
-                (
-        (position, carry, velocity, spin),
-        (start, acceleration, radius),
-        (restitution, friction, rolling_resistance, spin_damping),
-        (contacts, near),
-    ): (
-        (
-            Mut<Position>,
-            Mut<PositionCarry>,
-            Mut<Velocity>,
-            Mut<AngularVelocity>,
-        ),
-        (&StepStart, &Acceleration, &Radius),
-        (
-            &Restitution,
-            &Friction,
-            Option<&RollingResistance>,
-            Option<&SpinDamping>,
-        ),
-        (Mut<Contacts>, Mut<NearPieces>),
-    )| {
-        let material = Material::of_marble(restitution, friction, rolling_resistance, spin_damping);
-        let marble = (position, carry, velocity, Some(spin));
+                (m, s): (BoardStagedItem<'_, '_>, SpinStagedItem<'_, '_>)| {
+        let material = s.material(m.restitution);
+        let motion = (m.position, m.carry, m.velocity, Some(s.spin));
         stage.detect(
             touches,
-            marble,
-            start,
-            acceleration,
-            radius.0,
+            motion,
+            m.start,
+            m.acceleration,
+            m.radius.0,
             material,
-            contacts,
-            near,
+            m.contacts,
+            m.near,
         );
     };
     super::for_each_marble!(marbles, each);
-}
-
-/// What every marble's detection shares in a substep.
-struct Stage<'a> {
-    config: &'a StepConfig,
-    cache: &'a BoardCache,
-    params: SubstepParams,
 }
 
 /// A marble's motion state, as the detection systems hand it over.
@@ -165,16 +91,27 @@ type MarbleState<'w> = (
     Option<Mut<'w, AngularVelocity>>,
 );
 
+/// What every marble's detection shares in a substep.
+struct Stage<'a> {
+    config: &'a StepConfig,
+    cache: &'a BoardCache,
+    params: SubstepParams,
+    /// The substep's length, s.
+    h: f32,
+}
+
 impl<'a> Stage<'a> {
-    fn new(config: &'a StepConfig, cache: &'a BoardCache) -> Self {
+    fn new(config: &'a StepConfig, cache: &'a BoardCache, h: f32) -> Self {
         Stage {
             config,
             cache,
-            params: SubstepParams::from_config(config, cache.h),
+            params: SubstepParams::from_config(config, h),
+            h,
         }
     }
 
-    /// One marble's detection (see [`detect_contacts`]).
+    /// One marble's detection (see [`detect_board_contacts`]): its motion state (with its
+    /// spin when it carries one), `material` its side of its contacts.
     #[expect(
         clippy::too_many_arguments,
         reason = "a marble's components, handed over one by one"
@@ -193,7 +130,7 @@ impl<'a> Stage<'a> {
     ) {
         let (config, cache, params) = (self.config, self.cache, &self.params);
         let boards = cache.boards.as_slice();
-        let h = cache.h;
+        let h = self.h;
         let contacts = contacts.bypass_change_detection();
         contacts.clear();
         if boards.is_empty() {

@@ -1,18 +1,20 @@
-//! Marble–marble contacts and impacts ([`crate::pairs`]): one system before integration
-//! (touching pairs: collisions at the start, contact forces, overlap) and one after the
-//! marble–board response (pairs that meet during the substep).
+//! Marble–marble pairs ([`crate::pairs`]): the `PairContacts` stage before integration
+//! (touching pairs: collisions at the start, contact forces, overlap) and the
+//! `PairImpacts` stage after the marble–board response (pairs that meet during the
+//! substep). Both drive the [`PairSolver`] through its phases.
 
 use bevy_ecs::prelude::*;
+use bevy_ecs::query::QueryData;
 use glam::Vec3;
 
+use super::Stepped;
+use crate::board_contact::{BoardCache, NearPieces};
 use crate::components::{
-    Acceleration, AngularVelocity, Contacts, Friction, Marble, Mass, Position, PositionCarry,
-    Quarantined, Radius, Restitution, StepStart, Velocity, compensated_add,
+    Acceleration, AngularVelocity, Contacts, Friction, Mass, Position, PositionCarry, Radius,
+    Restitution, StepStart, Velocity, compensated_add,
 };
-use crate::config::StepConfig;
-use crate::narrow::{BoardCache, NearPieces};
+use crate::config::{StepConfig, Substep};
 use crate::pairs::{BoardTouch, Body, MarbleContacts, PairParams, PairSolver};
-use crate::sleep::Sleeping;
 
 fn params(config: &StepConfig, h: f32) -> PairParams {
     PairParams {
@@ -36,13 +38,13 @@ fn board_touches(
     h: f32,
     at: f32,
 ) {
-    solver.touch_start.push(solver.board_touches.len() as u32);
+    solver.next_body_touches();
     for c in contacts.iter() {
         let Some(board) = cache.boards.get(c.piece.board()) else {
             continue;
         };
         let point = c.point + board.point_velocity(c.time, c.point) * (h - c.time);
-        solver.board_touches.push(BoardTouch {
+        solver.push_board_touch(BoardTouch {
             body,
             normal: c.normal,
             point,
@@ -92,7 +94,7 @@ fn speculative_touches(
             let velocity = board.point_velocity(0.0, point);
             let closing = (-(d - velocity * h).dot(normal)).max(0.0) + a.length() * h * h;
             if gap <= closing {
-                solver.board_touches.push(BoardTouch {
+                solver.push_board_touch(BoardTouch {
                     body,
                     normal,
                     point,
@@ -118,7 +120,8 @@ fn free_path(config: &StepConfig, h: f32, v: Vec3, a: Vec3, contacts: &Contacts)
     config.integrator.delta(v, a, h).0
 }
 
-/// Writes a body's position (by compensated summation of its move) and velocity back.
+/// Writes a body's position (by compensated summation of its move) and velocity back to
+/// its marble.
 fn write_back(
     compensated: bool,
     body: &Body,
@@ -133,121 +136,133 @@ fn write_back(
     velocity.0 = body.v;
 }
 
+/// What the contact stage (`PairContacts`) reads and writes of a marble.
+#[derive(QueryData)]
+#[query_data(mutable)]
+pub struct PairContactStaged {
+    entity: Entity,
+    position: &'static mut Position,
+    carry: &'static mut PositionCarry,
+    velocity: &'static mut Velocity,
+    acceleration: &'static mut Acceleration,
+    radius: &'static Radius,
+    mass: &'static Mass,
+    restitution: &'static Restitution,
+    contacts: &'static Contacts,
+    near: &'static NearPieces,
+    spin: Option<&'static mut AngularVelocity>,
+    friction: Option<&'static Friction>,
+}
+
+/// What the impact stage (`PairImpacts`) reads and writes of a marble.
+#[derive(QueryData)]
+#[query_data(mutable)]
+pub struct PairImpactStaged {
+    entity: Entity,
+    position: &'static mut Position,
+    carry: &'static mut PositionCarry,
+    velocity: &'static mut Velocity,
+    start: &'static StepStart,
+    radius: &'static Radius,
+    mass: &'static Mass,
+    restitution: &'static Restitution,
+    contacts: &'static Contacts,
+}
+
 /// Before integration: the touching pairs of [`crate::pairs`] (collisions at the start,
 /// contact forces added to the marbles' acceleration, overlap projected out). Runs only
 /// with `marble_collisions` on.
-pub fn marble_contacts(
+pub fn pair_contacts(
     config: Res<StepConfig>,
+    substep: Res<Substep>,
     cache: Res<BoardCache>,
     mut solver: ResMut<PairSolver>,
     mut recorded: ResMut<MarbleContacts>,
-    mut marbles: Query<
-        (
-            Entity,
-            (
-                &mut Position,
-                &mut PositionCarry,
-                &mut Velocity,
-                &mut Acceleration,
-            ),
-            (&Radius, &Mass, &Restitution, &Contacts, &NearPieces),
-            (Option<&mut AngularVelocity>, Option<&Friction>),
-        ),
-        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
-    >,
+    mut marbles: Query<PairContactStaged, Stepped>,
 ) {
-    let h = cache.h;
+    let h = substep.h;
     let params = params(&config, h);
     let solver = solver.as_mut();
-    // The broad phase first: marbles spread apart stop there.
+    // 1. The broad phase first: marbles spread apart stop there.
     recorded.list.clear();
     solver.begin(marbles.iter().len(), &mut recorded);
-    for (entity, (position, _, velocity, acceleration), (radius, _, _, contacts, _), _) in &marbles
-    {
-        let d = free_path(&config, h, velocity.0, acceleration.0, contacts);
-        let sphere = PairSolver::contact_sphere(&params, position.0, d, radius.0);
-        solver.push_sphere(entity, sphere, radius.0);
-        solver.paths.push(d);
+    for m in &marbles {
+        let d = free_path(&config, h, m.velocity.0, m.acceleration.0, m.contacts);
+        let sphere = PairSolver::contact_sphere(&params, m.position.0, d, m.radius.0);
+        solver.push_sphere(m.entity, sphere, m.radius.0);
+        solver.push_free_path(d);
     }
     if !solver.cover_gathered() {
         solver.forget_contacts();
         return;
     }
-    solver.bodies.clear();
-    // (Plain loops with a counter: through `enumerate` the compiler leaves the query's
-    // `next` a call per marble.)
-    for (
-        entity,
-        (position, _, velocity, acceleration),
-        (radius, mass, restitution, _, _),
-        (spin, friction),
-    ) in &marbles
-    {
-        let d = solver.paths[solver.bodies.len()];
-        solver.bodies.push(Body {
-            entity,
-            x: position.0,
-            x0: position.0,
-            v: velocity.0,
-            v0: velocity.0,
-            w: mass.inverse(),
-            r: radius.0,
-            e: restitution.0,
-            a: acceleration.0,
-            d,
-            omega: spin.as_ref().map_or(Vec3::ZERO, |w| w.0),
-            spins: config.rolling && spin.is_some(),
-            mu: friction.map_or(0.0, |f| f.0),
+    // 2. The bodies at the substep's start, each on the free path pushed with its sphere.
+    // (A plain loop: through `enumerate` or `zip` the compiler leaves the query's `next` a
+    // call per marble.)
+    solver.clear_bodies();
+    for m in &marbles {
+        solver.push_body_on_free_path(Body {
+            entity: m.entity,
+            x: m.position.0,
+            x0: m.position.0,
+            v: m.velocity.0,
+            v0: m.velocity.0,
+            w: m.mass.inverse(),
+            r: m.radius.0,
+            e: m.restitution.0,
+            a: m.acceleration.0,
+            d: Vec3::ZERO,
+            omega: m.spin.as_ref().map_or(Vec3::ZERO, |w| w.0),
+            spins: config.rolling && m.spin.is_some(),
+            mu: m.friction.map_or(0.0, |f| f.0),
         });
     }
     if !solver.find_touching(&params) {
         return;
     }
-    solver.board_touches.clear();
-    solver.touch_start.clear();
-    for (body, (_, _, (radius, _, restitution, contacts, near), _)) in (0usize..).zip(&marbles) {
-        // Only the marbles in the rows: the contact stage reads no other marble's boards
-        // (its cascade and passes run on the rows' marbles).
-        if !solver.in_contact[body] {
-            solver.touch_start.push(solver.board_touches.len() as u32);
+    // 3. The board contacts of the marbles in the rows: the contact stage reads no other
+    // marble's boards (its cascade and passes run on the rows' marbles).
+    solver.begin_board_touches();
+    for (body, m) in (0usize..).zip(&marbles) {
+        if !solver.in_rows(body) {
+            solver.next_body_touches();
             continue;
         }
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
-        board_touches(solver, &cache, body as u32, contacts, restitution.0, h, 0.0);
-        let b = &solver.bodies[body];
+        let e = m.restitution.0;
+        board_touches(solver, &cache, body as u32, m.contacts, e, h, 0.0);
+        let b = solver.body(body);
         let state = (b.x, b.v, b.a, b.d);
         speculative_touches(
             solver,
             &cache,
             body as u32,
             state,
-            radius.0,
-            contacts,
-            near,
-            restitution.0,
+            m.radius.0,
+            m.contacts,
+            m.near,
+            e,
             h,
         );
     }
-    solver.touch_start.push(solver.board_touches.len() as u32);
+    solver.end_board_touches();
+    // 4. Solve, and write back what changed.
     solver.solve_touching(&params, &mut recorded);
-    for (k, (_, (mut position, mut carry, mut velocity, mut acceleration), _, (spin, _))) in
-        (0usize..).zip(&mut marbles)
-    {
-        if !solver.changed[k] {
+    for (k, mut m) in (0usize..).zip(&mut marbles) {
+        let Some(body) = solver.changed_body(k) else {
             continue;
-        }
-        let body = &solver.bodies[k];
+        };
         write_back(
             config.compensated,
             body,
-            &mut position,
-            &mut carry,
-            &mut velocity,
+            &mut m.position,
+            &mut m.carry,
+            &mut m.velocity,
         );
-        acceleration.0 = body.a;
+        m.acceleration.0 = body.a;
         if body.spins
-            && let Some(mut spin) = spin
+            && let Some(spin) = m.spin.as_mut()
         {
             spin.0 = body.omega;
         }
@@ -256,44 +271,39 @@ pub fn marble_contacts(
 
 /// After the marble–board response: pairs of [`crate::pairs`] that meet during the
 /// substep collide at their time of impact. Runs only with `marble_collisions` on.
-pub fn collide_marbles(
+pub fn pair_impacts(
     config: Res<StepConfig>,
+    substep: Res<Substep>,
     cache: Res<BoardCache>,
     mut solver: ResMut<PairSolver>,
     mut recorded: ResMut<MarbleContacts>,
-    mut marbles: Query<
-        (
-            Entity,
-            (&mut Position, &mut PositionCarry, &mut Velocity),
-            (&StepStart, &Radius, &Mass, &Restitution, &Contacts),
-        ),
-        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
-    >,
+    mut marbles: Query<PairImpactStaged, Stepped>,
 ) {
-    let h = cache.h;
+    let h = substep.h;
     let params = params(&config, h);
     let solver = solver.as_mut();
-    // The broad phase first, on the paths the marbles took: marbles spread apart stop
+    // 1. The broad phase first, on the paths the marbles took: marbles spread apart stop
     // there.
     solver.begin(marbles.iter().len(), &mut recorded);
-    for (entity, (position, _, _), (start, radius, _, _, _)) in &marbles {
-        let sphere = PairSolver::impact_sphere(&params, start.position, position.0, radius.0);
-        solver.push_sphere(entity, sphere, radius.0);
+    for m in &marbles {
+        let sphere = PairSolver::impact_sphere(&params, m.start.position, m.position.0, m.radius.0);
+        solver.push_sphere(m.entity, sphere, m.radius.0);
     }
     if !solver.cover_gathered() {
         return;
     }
-    solver.bodies.clear();
-    for (entity, (position, _, velocity), (start, radius, mass, restitution, _)) in &marbles {
-        solver.bodies.push(Body {
-            entity,
-            x: position.0,
-            x0: start.position,
-            v: velocity.0,
-            v0: start.velocity,
-            w: mass.inverse(),
-            r: radius.0,
-            e: restitution.0,
+    // 2. The bodies: where each marble started the substep and where it ended.
+    solver.clear_bodies();
+    for m in &marbles {
+        solver.push_body(Body {
+            entity: m.entity,
+            x: m.position.0,
+            x0: m.start.position,
+            v: m.velocity.0,
+            v0: m.start.velocity,
+            w: m.mass.inverse(),
+            r: m.radius.0,
+            e: m.restitution.0,
             a: Vec3::ZERO,
             d: Vec3::ZERO,
             omega: Vec3::ZERO,
@@ -304,23 +314,32 @@ pub fn collide_marbles(
     if !solver.find_impacts(&params) {
         return;
     }
-    solver.board_touches.clear();
-    solver.touch_start.clear();
-    for (body, (_, _, (_, _, _, restitution, contacts))) in (0usize..).zip(&marbles) {
-        board_touches(solver, &cache, body as u32, contacts, restitution.0, h, h);
+    // 3. Every marble's board contacts of this substep.
+    solver.begin_board_touches();
+    for (body, m) in (0usize..).zip(&marbles) {
+        board_touches(
+            solver,
+            &cache,
+            body as u32,
+            m.contacts,
+            m.restitution.0,
+            h,
+            h,
+        );
     }
-    solver.touch_start.push(solver.board_touches.len() as u32);
+    solver.end_board_touches();
+    // 4. Collide, and write back what changed.
     solver.resolve_impacts(&params, &cache.boards, &mut recorded);
-    for (k, (_, (mut position, mut carry, mut velocity), _)) in (0usize..).zip(&mut marbles) {
-        if !solver.changed[k] {
+    for (k, mut m) in (0usize..).zip(&mut marbles) {
+        let Some(body) = solver.changed_body(k) else {
             continue;
-        }
+        };
         write_back(
             config.compensated,
-            &solver.bodies[k],
-            &mut position,
-            &mut carry,
-            &mut velocity,
+            body,
+            &mut m.position,
+            &mut m.carry,
+            &mut m.velocity,
         );
     }
 }

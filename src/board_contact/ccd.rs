@@ -1,0 +1,216 @@
+//! Continuous collision: the first time along a marble's path at which it reaches a piece
+//! it does not touch yet (conservative advancement).
+
+use super::*;
+
+/// Conservative-advancement iterations per piece before giving up on convergence (the
+/// marble is then advanced to the last safe time and the search resumes from there).
+pub(super) const MAX_ADVANCE_ITERATIONS: u32 = 64;
+
+/// The path of a marble over part of a substep: centre `x` and path velocity `v` at time
+/// `t0` of the substep, constant acceleration `a`: `x(τ) = x + v τ + ½ a τ²`.
+#[derive(Clone, Copy, Debug)]
+pub struct Path {
+    /// Time of the path's start within the substep, s.
+    pub t0: f32,
+    /// Centre at `t0`.
+    pub x: Vec3,
+    /// Path velocity at `t0`.
+    pub v: Vec3,
+    /// Acceleration.
+    pub a: Vec3,
+}
+
+impl Path {
+    /// Centre at `t0 + tau`.
+    #[inline]
+    pub fn position(&self, tau: f32) -> Vec3 {
+        self.x + self.v * tau + self.a * (0.5 * tau * tau)
+    }
+
+    /// Centre and velocity at `t0 + tau`.
+    #[inline]
+    pub fn state(&self, tau: f32) -> (Vec3, Vec3) {
+        (self.position(tau), self.v + self.a * tau)
+    }
+}
+
+/// The earliest impact along `path` within `span` seconds with a piece the marble does not
+/// touch at the path's start: `(tau, piece)`, `tau` measured from `path.t0`.
+///
+/// Pieces in `touching` are skipped without a distance query (the marble touches them).
+/// `near`, the marble's [`NearPieces`], stands in for its board's search where it covers
+/// the path (the same answer either way).
+pub fn earliest_impact(
+    boards: &[BoardSnapshot],
+    near: Option<&NearPieces>,
+    path: &Path,
+    span: f32,
+    r: f32,
+    tol: f32,
+    touching: &TouchList,
+) -> Option<(f32, PieceId)> {
+    let end = path.position(span);
+    // Bounds of the path: the chord plus the parabola's bulge (⅛ |a| span², rounded up).
+    let bulge = 0.25 * path.a.length() * span * span;
+    let reach = r + tol + bulge;
+    let world = Aabb::new(
+        path.x.min(end) - Vec3::splat(reach),
+        path.x.max(end) + Vec3::splat(reach),
+    );
+    // Where the centre itself can be (no radius): for the flat-face bound below.
+    let centres = Aabb::new(
+        path.x.min(end) - Vec3::splat(bulge),
+        path.x.max(end) + Vec3::splat(bulge),
+    );
+    let marble_speed = path.v.length() + path.a.length() * span;
+    let hint = -path.v;
+    let mut best: Option<(f32, PieceId)> = None;
+
+    for (bi, b) in boards.iter().enumerate() {
+        if let Some(a) = &b.swept_aabb
+            && !overlaps(a, &world)
+        {
+            continue;
+        }
+        let (c0, q0) = b.pose_at(path.t0);
+        let moving = b.is_moving();
+        // The rate of the centre's distance to a flat face with normal n0 (world, at the
+        // path's start) is n(τ)·ẏ(τ) with |n(τ) − n0| ≤ |ω| τ: bounded by the normal
+        // component of the relative motion plus the turning terms (module docs).
+        let wv = b.angular_velocity;
+        let w = wv.length();
+        let rel = path.v - b.velocity;
+        let u0 = rel - wv.cross(path.x - c0);
+        let bb = path.a - wv.cross(rel);
+        let curl = 0.5 * span * span * w * path.a.length();
+        let face_speed = |n0: Vec3| {
+            n0.dot(u0).abs()
+                + span * n0.dot(bb).abs()
+                + curl
+                + w * span * (u0.length() + span * bb.length() + curl)
+        };
+        // Speed bound of the marble relative to the board's frame (a still board: the
+        // marble's own speed bound). For a moving board: the distance to a piece changes
+        // no faster than the marble's position in the board's frame, y = Rᵀ(x − c), whose
+        // rate is the marble's velocity relative to the board's material point under it:
+        //   ẏ = Rᵀ(u0 + τ (a − ω × (v − v_b)) − ½ τ² ω × a),
+        //   u0 = v − v_b − ω × (x − c) at the path's start.
+        // A marble riding a turning board has u0 ≈ 0, so the bound stays tight where
+        // the board's own speed would make conservative advancement crawl.
+        let speed = if moving {
+            u0.length() + span * bb.length() + curl
+        } else {
+            marble_speed
+        };
+        if speed <= 0.0 {
+            continue;
+        }
+        // Whether the marble's list covers every centre of the path in the board's frame:
+        // on a still board they lie within half the chord and the bulge of the chord's
+        // middle, on a moving one within `speed · span` of the start. A list that covers
+        // them and holds only touched pieces leaves nothing to search.
+        let list = NearPieces::of(near, bi);
+        let covered = list.is_some_and(|l| {
+            if moving {
+                l.covers(q0.conjugate() * (path.x - c0), speed * span, tol)
+            } else {
+                let spread = 0.5 * (end - path.x).length() + bulge;
+                l.covers(q0.conjugate() * (0.5 * (path.x + end) - c0), spread, tol)
+            }
+        });
+        if covered && list.is_some_and(|l| l.pieces().iter().all(|&p| touching.contains(p))) {
+            continue;
+        }
+        // Everything the marble can reach this substep, in the board's frame; a moving
+        // board sees it through both end poses and, if it turns, a margin for the turn.
+        let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());
+        let mut centre_query = transform_aabb(&centres, q0.conjugate() * -c0, q0.conjugate());
+        if moving {
+            let (c1, q1) = b.pose_at(path.t0 + span);
+            let q_end = transform_aabb(&world, q1.conjugate() * -c1, q1.conjugate());
+            query = Aabb::new(query.mins.min(q_end.mins), query.maxs.max(q_end.maxs));
+            let c_end = transform_aabb(&centres, q1.conjugate() * -c1, q1.conjugate());
+            centre_query = Aabb::new(
+                centre_query.mins.min(c_end.mins),
+                centre_query.maxs.max(c_end.maxs),
+            );
+            let far = (path.x - c0).length() + (marble_speed + b.velocity.length()) * span;
+            let turn = w * span * far;
+            query = Aabb::new(
+                query.mins - Vec3::splat(turn),
+                query.maxs + Vec3::splat(turn),
+            );
+            centre_query = Aabb::new(
+                centre_query.mins - Vec3::splat(turn),
+                centre_query.maxs + Vec3::splat(turn),
+            );
+        }
+        let limit = best.map_or(span, |(t, _)| t);
+        let each = |part: usize, sub: u32, piece: &Piece| {
+            if touching.contains(PieceId::new(bi, part, sub)) {
+                return;
+            }
+            let limit = best.map_or(limit, |(t, _)| t.min(limit));
+            let gap_at = |tau: f32| {
+                let (c, q) = if moving {
+                    b.pose_at(path.t0 + tau)
+                } else {
+                    (c0, q0)
+                };
+                let inv = q.conjugate();
+                let local = inv * (path.position(tau) - c);
+                b.geometry
+                    .proximity(part, piece, local, inv * hint)
+                    .distance
+                    - r
+            };
+            let mut gap = gap_at(0.0);
+            if gap <= tol {
+                return; // touching already: a contact, not an impact
+            }
+            // Over a flat face, only the normal motion counts: a marble sliding or riding
+            // just above a surface would otherwise make the advancement crawl.
+            let speed = match b.geometry.face_normal(part, piece, &centre_query) {
+                Some(n) => speed.min(face_speed(q0 * n)),
+                None => speed,
+            };
+            if speed <= 0.0 {
+                return;
+            }
+            // With |ḋ| ≤ L, the gap cannot fall to `tol` inside [τ, end] and climb back to
+            // its value at the end unless (d(τ) − tol) + (d(end) − tol) ≤ L (end − τ): where
+            // that fails, no impact is possible in the rest of the span.
+            // (Evaluated from the second step on: most pieces are done in one.)
+            let mut gap_end = None;
+            let mut tau = 0.0;
+            for i in 0..MAX_ADVANCE_ITERATIONS {
+                if i > 0 {
+                    let end = *gap_end.get_or_insert_with(|| gap_at(limit));
+                    if end > tol && (gap - tol) + (end - tol) > speed * (limit - tau) {
+                        return;
+                    }
+                }
+                // Stop within half the tolerance (never closer than a quarter): the touch
+                // gathered at the impact, with the full tolerance, then certainly includes
+                // this piece despite rounding in positions.
+                tau += (gap - 0.25 * tol) / speed;
+                if tau >= limit {
+                    return;
+                }
+                gap = gap_at(tau);
+                if gap <= 0.5 * tol {
+                    break;
+                }
+            }
+            // Converged, or out of iterations at a safe time: either way report it, the
+            // caller advances there and searches again.
+            best = Some((tau, PieceId::new(bi, part, sub)));
+        };
+        match list {
+            Some(l) if covered => l.visit(&b.geometry, each),
+            _ => b.geometry.for_each_piece(&query, each),
+        }
+    }
+    best
+}

@@ -1,0 +1,473 @@
+//! Near-piece lists: the few pieces of a board within reach of a marble, kept while it
+//! stays within that reach (a Verlet list for board pieces).
+
+use super::*;
+
+/// Most pieces a [`NearPieces`] list holds.
+pub const NEAR_MAX: usize = 5;
+
+/// The pieces of one board near a marble, so that its queries visit those instead of
+/// searching the board: a Verlet list (a "skin") for board pieces.
+///
+/// Built around an *anchor*, the marble's centre in the board's frame, it holds every piece
+/// whose distance from the anchor, minus the radius, is below `reach`. Any piece within
+/// `g` of a centre `y` (board frame) is then within `g + |y − anchor|` of the anchor, so a
+/// query whose centres stay within `reach − g` of the anchor needs only the listed pieces
+/// ([`NearPieces::covers`]). The test is made in the board's frame at the query's time, so a
+/// marble riding a moving or turning board keeps its list as long as it stays near the
+/// same spot of the board. Queries the list does not cover search the board, and
+/// detection rebuilds a list that no longer covers the substep's start. The pieces are kept
+/// in the order a search visits them, so a query gives the same bits either way.
+#[derive(Component, Clone, Copy, Debug)]
+pub struct NearPieces {
+    pieces: [PieceId; NEAR_MAX],
+    len: u8,
+    /// Index of the board in [`BoardCache::boards`]; `u32::MAX`: no list.
+    board: u32,
+    /// The [`BoardCache::epoch`] it was built in.
+    epoch: u32,
+    /// The radius it was built for.
+    radius: f32,
+    /// Centre when built, board frame.
+    anchor: Vec3,
+    /// Every piece of the board closer than this to the anchor (distance minus radius) is
+    /// listed.
+    reach: f32,
+    /// Centre when built, world.
+    anchor_world: Vec3,
+    /// The board's [`BoardSnapshot::pose_version`] when built: while it is the same, the
+    /// board has not moved and the list can be tested in the world frame.
+    pose_version: u32,
+    /// For a lone piece of a still board, flat under every centre the list covers: its
+    /// normal (world; zero otherwise) and the anchor's gap to it.
+    face_normal: Vec3,
+    face_gap: f32,
+    /// Each listed piece's gap from the anchor (distance minus radius) when built.
+    gaps: [f32; NEAR_MAX],
+}
+
+impl Default for NearPieces {
+    fn default() -> Self {
+        NearPieces {
+            pieces: [PieceId::NONE; NEAR_MAX],
+            len: 0,
+            board: u32::MAX,
+            epoch: 0,
+            radius: 0.0,
+            anchor: Vec3::ZERO,
+            reach: 0.0,
+            anchor_world: Vec3::ZERO,
+            pose_version: 0,
+            face_normal: Vec3::ZERO,
+            face_gap: 0.0,
+            gaps: [f32::INFINITY; NEAR_MAX],
+        }
+    }
+}
+
+impl NearPieces {
+    /// The listed pieces.
+    #[inline]
+    pub fn pieces(&self) -> &[PieceId] {
+        &self.pieces[..self.len as usize]
+    }
+
+    /// Calls `f(part, sub, piece)` for every listed piece of `geometry` (the list's
+    /// board), in the order a search visits them.
+    #[inline]
+    pub(super) fn visit(&self, geometry: &BoardGeometry, mut f: impl FnMut(usize, u32, &Piece)) {
+        for id in self.pieces() {
+            f(id.part(), id.sub(), &geometry.piece(id.part(), id.sub()));
+        }
+    }
+
+    /// The list for board `board`, if this is it.
+    #[inline]
+    pub(super) fn of(near: Option<&NearPieces>, board: usize) -> Option<&NearPieces> {
+        near.filter(|l| l.board as usize == board)
+    }
+
+    /// True when every piece within `gap` of some centre within `spread` of `centre` (board
+    /// frame) is listed.
+    #[inline]
+    pub fn covers(&self, centre: Vec3, spread: f32, gap: f32) -> bool {
+        (centre - self.anchor).length() + spread + gap < self.reach
+    }
+
+    /// True when the list was built for these boards and this radius and covers the
+    /// centres within `spread` of `x` (world, at the substep's start) for touches within
+    /// `tol`.
+    pub fn is_fresh(&self, cache: &BoardCache, x: Vec3, r: f32, spread: f32, tol: f32) -> bool {
+        if self.board == u32::MAX || self.epoch != cache.epoch || self.radius != r {
+            return false;
+        }
+        let Some(b) = cache.boards.get(self.board as usize) else {
+            return false;
+        };
+        if b.pose_version == self.pose_version {
+            // The board is where it was: its frame moved with it.
+            return (x - self.anchor_world).length() + spread + tol < self.reach;
+        }
+        self.covers(b.rotation.conjugate() * (x - b.position), spread, tol)
+    }
+
+    /// The one touch [`gather`] would find at the substep's start for a marble of radius
+    /// `r` at `x` (world) moving at `v` under acceleration `a` (and friction, when it
+    /// `spins`), when the list can vouch that
+    /// it is the only piece within reach of the marble's whole substep of length `h` on it:
+    /// the list holds one piece, of a board that does not move, and covers every centre
+    /// the marble can reach sliding on the piece (its speed, and the acceleration the piece
+    /// leaves it, over `h`), and no other board comes within reach. On a moving board (the
+    /// scene's only board) the list vouches only that this is the one touch at the start:
+    /// the event loop resolves it, its searches using the list where it covers. `None`
+    /// when the list cannot tell or the piece is farther than `tol`.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a hot kernel taking plain values"
+    )]
+    pub fn lone_touch(
+        &self,
+        boards: &[BoardSnapshot],
+        x: Vec3,
+        v: Vec3,
+        a: Vec3,
+        h: f32,
+        r: f32,
+        tol: f32,
+        material: &Material,
+        spins: bool,
+    ) -> Option<Touch> {
+        let [id] = *self.pieces() else {
+            return None;
+        };
+        let bi = self.board as usize;
+        let b = boards.get(bi)?;
+        let moving = b.is_moving();
+        if moving && boards.len() > 1 {
+            return None;
+        }
+        let touch =
+            if !moving && self.face_normal != Vec3::ZERO && b.pose_version == self.pose_version {
+                // A flat face where it was: the distance is affine in the centre.
+                let d = x - self.anchor_world;
+                if d.length() + tol >= self.reach {
+                    return None;
+                }
+                let n = self.face_normal;
+                let gap = self.face_gap + n.dot(d);
+                if gap.abs() > tol {
+                    return None;
+                }
+                Touch {
+                    piece: id,
+                    point: x - (r + gap) * n,
+                    normal: n,
+                    gap,
+                    board_velocity: Vec3::ZERO,
+                    surface_accel: 0.0,
+                    board_spin: Vec3::ZERO,
+                    material: material.combine(b),
+                    convex: true,
+                }
+            } else {
+                // As `gather` computes it (at the board's pose at the start, bit for bit).
+                let (c, q) = b.pose_at(0.0);
+                let inv = q.conjugate();
+                let local = inv * (x - c);
+                if !self.covers(local, 0.0, tol) {
+                    return None;
+                }
+                let piece = b.geometry.piece(id.part(), id.sub());
+                let p = b.geometry.proximity(id.part(), &piece, local, inv * -v);
+                let gap = p.distance - r;
+                if gap > tol {
+                    return None;
+                }
+                let point = q * p.point + c;
+                let normal = q * p.normal;
+                Touch {
+                    piece: id,
+                    point,
+                    normal,
+                    gap,
+                    board_velocity: b.point_velocity(0.0, point),
+                    surface_accel: b.surface_accel(0.0, point, normal),
+                    board_spin: b.angular_velocity,
+                    material: material.combine(b),
+                    convex: piece.is_convex(),
+                }
+            };
+        if moving {
+            // The one touch at the start (the list covers the centre, and there is no
+            // other board); the event loop does the rest.
+            return Some(touch);
+        }
+        // Where the marble can go: at most its speed, and the acceleration the piece
+        // leaves it (none into the piece; friction adds at most μ times the normal force
+        // for a marble that spins), over the substep; the list and the other boards must
+        // leave nothing within reach of that.
+        let n = touch.normal;
+        let into = a.dot(n).min(0.0);
+        let along = a - into * n;
+        let grip = if spins {
+            touch.material.friction * -into
+        } else {
+            0.0
+        };
+        let spread = (v.length() + 2.0 * (along.length() + grip) * h) * h;
+        let clear = if b.pose_version == self.pose_version {
+            (x - self.anchor_world).length() + spread + tol < self.reach
+        } else {
+            self.covers(b.rotation.conjugate() * (x - b.position), spread, tol)
+        };
+        if !clear {
+            return None;
+        }
+        let reach = r + tol + spread;
+        let world = sphere_aabb(x, reach);
+        // (With one board, the common case, there are no others: skip the search, whose
+        // closure the compiler leaves a call.)
+        let others_clear = boards.len() == 1
+            || boards.iter().enumerate().all(|(i, o)| {
+                if i == bi {
+                    return true;
+                }
+                match &o.swept_aabb {
+                    Some(a) => !overlaps(a, &world),
+                    // Unbounded (a plane): clear if still and no piece is near.
+                    None if !o.is_moving() => {
+                        let local = o.rotation.conjugate() * (x - o.position);
+                        let mut near = false;
+                        o.geometry
+                            .for_each_piece(&sphere_aabb(local, reach), |_, _, _| near = true);
+                        !near
+                    }
+                    None => false,
+                }
+            });
+        others_clear.then_some(touch)
+    }
+
+    /// Calls `f(piece, point, normal, gap)` (world, at the substep's start) for every
+    /// piece, other than those `skip` names, that a marble of radius `r` at `x` (world, at
+    /// the substep's start) moving at `v` could reach within a substep of length `h`: one
+    /// within `reach` (the marble's own motion) plus how far the piece's board can move
+    /// towards it in the substep (its speed plus its turn times the distance, bounded
+    /// over the reach). The list's board is read from the list when it covers that reach
+    /// (a piece whose gap when the list was built, less how far the marble has moved since
+    /// in the board's frame, is out of reach is passed over without a distance query);
+    /// every other board, and the list's when it does not cover, is searched. The pair
+    /// solver's speculative board rows ([`crate::pairs`]).
+    #[expect(clippy::too_many_arguments, reason = "a marble's state, handed over")]
+    pub fn within(
+        &self,
+        cache: &BoardCache,
+        x: Vec3,
+        v: Vec3,
+        r: f32,
+        reach: f32,
+        h: f32,
+        skip: impl Fn(PieceId) -> bool,
+        mut f: impl FnMut(PieceId, Vec3, Vec3, f32),
+    ) {
+        let mut visit =
+            |bi: usize, b: &BoardSnapshot, part: usize, sub: u32, piece: &Piece, limit: f32| {
+                let id = PieceId::new(bi, part, sub);
+                if skip(id) {
+                    return;
+                }
+                let (c, q) = (b.position, b.rotation);
+                let inv = q.conjugate();
+                let p = b.geometry.proximity(part, piece, inv * (x - c), inv * -v);
+                let gap = p.distance - r;
+                if gap <= limit {
+                    f(id, q * p.point + c, q * p.normal, gap);
+                }
+            };
+        for (bi, b) in cache.boards.iter().enumerate() {
+            let turn = b.angular_velocity.length() * ((x - b.position).length() + r + reach);
+            let limit = reach + (b.velocity.length() + turn) * h;
+            if bi == self.board as usize && self.is_fresh(cache, x, r, 0.0, limit) {
+                // A piece's gap is at most how far the marble has moved from where the
+                // list was built (in the board's frame) below its gap there.
+                let moved = if b.pose_version == self.pose_version {
+                    (x - self.anchor_world).length()
+                } else {
+                    (b.rotation.conjugate() * (x - b.position) - self.anchor).length()
+                };
+                for (&id, &gap) in self.pieces().iter().zip(&self.gaps) {
+                    if gap - moved <= limit {
+                        let piece = b.geometry.piece(id.part(), id.sub());
+                        visit(bi, b, id.part(), id.sub(), &piece, limit);
+                    }
+                }
+                continue;
+            }
+            if let Some(a) = &b.swept_aabb
+                && !overlaps(a, &sphere_aabb(x, r + limit))
+            {
+                continue;
+            }
+            let local = b.rotation.conjugate() * (x - b.position);
+            b.geometry
+                .for_each_piece(&sphere_aabb(local, r + limit), |part, sub, piece| {
+                    visit(bi, b, part, sub, piece, limit)
+                });
+        }
+    }
+
+    /// Rebuilds the list around a marble of radius `r` at `x` (world, the substep's start):
+    /// the board with the nearest piece within `tol + skin`, and its pieces within that
+    /// reach (the nearest [`NEAR_MAX`] of them, the reach shrunk to exclude the rest; only
+    /// the nearest, when the next is beyond half the reach).
+    /// Leaves no list when there is no board.
+    pub fn rebuild(&mut self, cache: &BoardCache, x: Vec3, r: f32, tol: f32, skin: f32) {
+        *self = NearPieces {
+            epoch: cache.epoch,
+            radius: r,
+            ..NearPieces::default()
+        };
+        let limit = tol + skin;
+        let world = sphere_aabb(x, r + limit);
+        // The best board so far: its nearest gap, its pieces (visit order, piece, gap)
+        // and the smallest gap left out.
+        let mut best: Option<(f32, Candidates)> = None;
+        for (bi, b) in cache.boards.iter().enumerate() {
+            if let Some(a) = &b.swept_aabb
+                && !overlaps(a, &world)
+            {
+                continue;
+            }
+            let inv = b.rotation.conjugate();
+            let local = inv * (x - b.position);
+            let mut found = Candidates::new(limit);
+            let mut order = 0u32;
+            b.geometry
+                .for_each_piece(&sphere_aabb(local, r + limit), |part, sub, piece| {
+                    let gap = b
+                        .geometry
+                        .proximity(part, piece, local, Vec3::ZERO)
+                        .distance
+                        - r;
+                    found.offer(order, PieceId::new(bi, part, sub), gap);
+                    order += 1;
+                });
+            let nearest = found.nearest();
+            if best.as_ref().is_none_or(|(g, _)| nearest < *g) {
+                self.board = bi as u32;
+                self.anchor = local;
+                self.pose_version = b.pose_version;
+                best = Some((nearest, found));
+            }
+        }
+        let Some((_, mut found)) = best else {
+            // Every board is out of reach: a list of none of the first board's pieces.
+            if let Some(b) = cache.boards.first() {
+                self.board = 0;
+                self.anchor = b.rotation.conjugate() * (x - b.position);
+                self.pose_version = b.pose_version;
+                self.anchor_world = x;
+                self.reach = limit;
+            }
+            return;
+        };
+        found.isolate_nearest();
+        found.kept[..found.len].sort_unstable_by_key(|c| c.0);
+        for (k, c) in found.kept[..found.len].iter().enumerate() {
+            self.pieces[k] = c.1;
+            self.gaps[k] = c.2;
+        }
+        self.len = found.len as u8;
+        self.anchor_world = x;
+        // A margin for the rounding of the distances the list was built from.
+        self.reach = found.excluded
+            - 8.0 * f32::EPSILON * (r + found.excluded + self.anchor.abs().max_element());
+        let b = &cache.boards[self.board as usize];
+        if let [id] = *self.pieces()
+            && !b.is_moving()
+            && let Some(n) = b
+                .geometry
+                .flat_face(id.part(), id.sub(), self.anchor, self.reach)
+        {
+            self.face_normal = b.rotation * n;
+            self.face_gap = found.kept[0].2;
+        }
+    }
+}
+
+/// The nearest pieces offered to a [`NearPieces`] build: up to [`NEAR_MAX`] with their
+/// gaps, and the smallest gap of those left out (the limit when none was).
+pub(super) struct Candidates {
+    kept: [(u32, PieceId, f32); NEAR_MAX],
+    len: usize,
+    excluded: f32,
+    /// The reach asked for.
+    limit: f32,
+}
+
+impl Candidates {
+    fn new(limit: f32) -> Self {
+        Candidates {
+            kept: [(0, PieceId::NONE, 0.0); NEAR_MAX],
+            len: 0,
+            excluded: limit,
+            limit,
+        }
+    }
+
+    /// Offers a piece at `gap`: kept if within the limit and among the nearest.
+    fn offer(&mut self, order: u32, piece: PieceId, gap: f32) {
+        if gap >= self.excluded {
+            return;
+        }
+        if self.len < NEAR_MAX {
+            self.kept[self.len] = (order, piece, gap);
+            self.len += 1;
+            return;
+        }
+        // Full: the farthest kept one makes way if it is farther.
+        let (far, _) = self
+            .kept
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.2.total_cmp(&b.1.2))
+            .expect("NEAR_MAX > 0");
+        if self.kept[far].2 > gap {
+            self.excluded = self.excluded.min(self.kept[far].2);
+            self.kept[far] = (order, piece, gap);
+        } else {
+            self.excluded = self.excluded.min(gap);
+        }
+    }
+
+    /// Keeps only the nearest piece, the reach shrunk to the next one's gap, when that
+    /// one is at least half the limit away: a marble on a floor a few radii from a wall
+    /// then holds a one-piece list (the closed form of [`NearPieces::lone_touch`] applies
+    /// to it) that lasts at least half as far as the full one.
+    fn isolate_nearest(&mut self) {
+        if self.len < 2 {
+            return;
+        }
+        let kept = &self.kept[..self.len];
+        let nearest = (0..kept.len())
+            .min_by(|&i, &j| kept[i].2.total_cmp(&kept[j].2))
+            .expect("two or more kept");
+        let next = (0..kept.len())
+            .filter(|&i| i != nearest)
+            .map(|i| kept[i].2)
+            .fold(f32::INFINITY, f32::min);
+        if next >= 0.5 * self.limit {
+            self.kept[0] = self.kept[nearest];
+            self.len = 1;
+            self.excluded = self.excluded.min(next);
+        }
+    }
+
+    /// The smallest gap offered (infinite when none).
+    fn nearest(&self) -> f32 {
+        self.kept[..self.len]
+            .iter()
+            .map(|c| c.2)
+            .fold(f32::INFINITY, f32::min)
+    }
+}

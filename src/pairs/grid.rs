@@ -1,0 +1,296 @@
+//! The broad phase's uniform grid, and the hasher of the warm-start keys.
+
+use super::*;
+
+/// A fast hasher for warm-start keys (entity bits are already well spread).
+#[derive(Default, Clone, Copy)]
+pub(crate) struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u64(&mut self, n: u64) {
+        self.0 = (self.0.rotate_left(5) ^ n).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
+/// Contact impulses by warm-start key: a pair's two marbles' entity bits (smaller first),
+/// or a marble's entity bits and a board piece's id with its bits flipped.
+pub(crate) type KeyMap = HashMap<(u64, u64), f32, BuildHasherDefault<KeyHasher>>;
+
+/// The hashed uniform grid of the broad phase (buffers reused between substeps).
+#[derive(Default, Debug)]
+pub(crate) struct Grid {
+    cell: f32,
+    mask: u32,
+    /// Dense mode: the lowest cell (less one in every axis) and the cell counts, when the
+    /// marbles' cells span few enough cells for one table entry per cell: neighbouring
+    /// cells are then neighbours in memory, and no two cells share a bucket. Otherwise
+    /// (`None`) cells are hashed.
+    pub(super) dense: Option<(IVec3, IVec3)>,
+    /// Bucket of each body.
+    bucket: Vec<u32>,
+    /// Start of each bucket in `order` (`mask + 2` entries).
+    start: Vec<u32>,
+    /// Ordinary bodies sorted by bucket.
+    order: Vec<u32>,
+    /// Cell of each entry of `order`.
+    cells: Vec<IVec3>,
+    /// Bound sphere (centre, radius) of each entry of `order`.
+    bounds: Vec<Vec4>,
+    /// Bodies too large or fast for the cell size.
+    large: Vec<u32>,
+}
+
+/// The 13 neighbours of a cell that come after it: with the cell itself they visit every
+/// pair of neighbouring cells once.
+pub(super) const FORWARD: [IVec3; 13] = [
+    IVec3::new(1, -1, -1),
+    IVec3::new(1, -1, 0),
+    IVec3::new(1, -1, 1),
+    IVec3::new(1, 0, -1),
+    IVec3::new(1, 0, 0),
+    IVec3::new(1, 0, 1),
+    IVec3::new(1, 1, -1),
+    IVec3::new(1, 1, 0),
+    IVec3::new(1, 1, 1),
+    IVec3::new(0, 1, -1),
+    IVec3::new(0, 1, 0),
+    IVec3::new(0, 1, 1),
+    IVec3::new(0, 0, 1),
+];
+
+/// The cell of point `p` for cells of size `1 / inv`: `floor(p · inv)` per axis, without
+/// a call to libm's `floorf` (baseline x86-64 has no rounding instruction).
+#[inline]
+pub(super) fn cell_of(p: Vec3, inv: f32) -> IVec3 {
+    let q = p * inv;
+    let t = q.as_ivec3();
+    t - IVec3::from(t.as_vec3().cmpgt(q))
+}
+
+#[inline]
+pub(super) fn hash_cell(c: IVec3) -> u32 {
+    (c.x as u32).wrapping_mul(0x8da6_b343)
+        ^ (c.y as u32).wrapping_mul(0xd816_3841)
+        ^ (c.z as u32).wrapping_mul(0xcb1a_b31f)
+}
+
+impl Grid {
+    /// Sizes the buffers for `n` bodies.
+    pub(crate) fn reserve(&mut self, n: usize) {
+        self.bucket.reserve(n);
+        self.start.reserve(8 * n + 66);
+        self.order.reserve(n);
+        self.cells.reserve(n);
+        self.bounds.reserve(n);
+        self.large.reserve(n);
+    }
+
+    /// Sorts the bodies into cells from their bound spheres `b` (centre, radius).
+    pub(crate) fn build(&mut self, b: &[Vec4]) {
+        let n = b.len();
+        self.large.clear();
+        self.order.clear();
+        self.cells.clear();
+        self.bounds.clear();
+        self.bucket.clear();
+        if n == 0 {
+            return;
+        }
+        let mean = b.iter().map(|s| s.w as f64).sum::<f64>() / n as f64;
+        let limit = 2.0 * mean as f32;
+        let largest = b
+            .iter()
+            .map(|s| s.w)
+            .filter(|&w| w <= limit)
+            .fold(0.0f32, f32::max);
+        self.cell = (2.0 * largest).max(f32::MIN_POSITIVE);
+        let inv = 1.0 / self.cell;
+        // The span of the ordinary marbles' cells, padded by one cell on every side so
+        // that every neighbour of an occupied cell has a table entry.
+        let (mut lo, mut hi) = (IVec3::MAX, IVec3::MIN);
+        for s in b.iter().filter(|s| s.w <= limit) {
+            let c = cell_of(s.truncate(), inv);
+            lo = lo.min(c);
+            hi = hi.max(c);
+        }
+        let dims = (hi - lo).as_i64vec3() + glam::I64Vec3::splat(3);
+        let cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
+        let table = if cells <= 8 * n as i64 + 64 {
+            self.dense = Some((lo - IVec3::ONE, dims.as_ivec3()));
+            cells as usize
+        } else {
+            self.dense = None;
+            (2 * n).next_power_of_two().max(16)
+        };
+        self.mask = (table - 1) as u32;
+        self.start.clear();
+        self.start.resize(table + 1, 0);
+        for (k, s) in b.iter().enumerate() {
+            if s.w > limit {
+                self.large.push(k as u32);
+                self.bucket.push(u32::MAX);
+                continue;
+            }
+            let h = self.bucket_of(cell_of(s.truncate(), inv));
+            self.bucket.push(h as u32);
+            self.start[h + 1] += 1;
+        }
+        for h in 0..table {
+            self.start[h + 1] += self.start[h];
+        }
+        let ordinary = n - self.large.len();
+        self.order.resize(ordinary, 0);
+        self.cells.resize(ordinary, IVec3::ZERO);
+        self.bounds.resize(ordinary, Vec4::ZERO);
+        // Scatter with a running cursor per bucket (the bucket starts, shifted back after).
+        for (k, s) in b.iter().enumerate() {
+            let h = self.bucket[k];
+            if h == u32::MAX {
+                continue;
+            }
+            let slot = self.start[h as usize] as usize;
+            self.start[h as usize] += 1;
+            self.order[slot] = k as u32;
+            self.cells[slot] = cell_of(s.truncate(), inv);
+            self.bounds[slot] = *s;
+        }
+        for h in (1..=table).rev() {
+            self.start[h] = self.start[h - 1];
+        }
+        self.start[0] = 0;
+    }
+
+    /// The bucket of cell `c`: its index in the dense table, or its hash. In dense mode
+    /// a cell outside the padded span (only large marbles ask for those) has no marbles:
+    /// it maps to the padding cell `0`, which is always empty.
+    #[inline]
+    fn bucket_of(&self, c: IVec3) -> usize {
+        match self.dense {
+            Some((lo, dims)) => {
+                let d = c - lo;
+                if d.cmplt(IVec3::ZERO).any() || d.cmpge(dims).any() {
+                    0
+                } else {
+                    ((d.x as usize * dims.y as usize) + d.y as usize) * dims.z as usize
+                        + d.z as usize
+                }
+            }
+            None => (hash_cell(c) & self.mask) as usize,
+        }
+    }
+
+    /// Entries of `order` in the bucket of cell `c`.
+    #[inline]
+    fn bucket_range(&self, c: IVec3) -> std::ops::Range<usize> {
+        let h = self.bucket_of(c);
+        self.start[h] as usize..self.start[h + 1] as usize
+    }
+
+    /// Calls `f(j)` for every body whose bound sphere overlaps sphere `s` (centre, radius).
+    pub(crate) fn query(&self, b: &[Vec4], s: Vec4, mut f: impl FnMut(u32)) {
+        let near = |q: Vec4| {
+            let r = s.w + q.w;
+            (s.truncate() - q.truncate()).length_squared() <= r * r
+        };
+        let half = 0.5 * self.cell;
+        let inv = 1.0 / self.cell;
+        let lo = cell_of(s.truncate() - Vec3::splat(s.w + half), inv);
+        let hi = cell_of(s.truncate() + Vec3::splat(s.w + half), inv);
+        let span = (hi - lo + IVec3::ONE).as_vec3();
+        if (span.x * span.y * span.z) as f64 > self.order.len() as f64 {
+            for q in 0..self.order.len() {
+                if near(self.bounds[q]) {
+                    f(self.order[q]);
+                }
+            }
+        } else {
+            for x in lo.x..=hi.x {
+                for y in lo.y..=hi.y {
+                    for z in lo.z..=hi.z {
+                        let c = IVec3::new(x, y, z);
+                        for q in self.bucket_range(c) {
+                            if self.cells[q] == c && near(self.bounds[q]) {
+                                f(self.order[q]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        for &l in &self.large {
+            if near(b[l as usize]) {
+                f(l);
+            }
+        }
+    }
+
+    /// Calls `f(i, j)` once for every pair of bodies whose bound spheres overlap.
+    pub(crate) fn pairs(&self, b: &[Vec4], mut f: impl FnMut(u32, u32)) {
+        let near = |p: Vec4, q: Vec4| {
+            let r = p.w + q.w;
+            (p.truncate() - q.truncate()).length_squared() <= r * r
+        };
+        for p in 0..self.order.len() {
+            let c = self.cells[p];
+            let bp = self.bounds[p];
+            let range = self.bucket_range(c);
+            for q in p + 1..range.end {
+                if self.cells[q] == c && near(bp, self.bounds[q]) {
+                    f(self.order[p], self.order[q]);
+                }
+            }
+            for d in FORWARD {
+                let cd = c + d;
+                for q in self.bucket_range(cd) {
+                    if self.cells[q] == cd && near(bp, self.bounds[q]) {
+                        f(self.order[p], self.order[q]);
+                    }
+                }
+            }
+        }
+        // Large bodies: against every ordinary body through the cells their bound covers
+        // (or all of them, when that is fewer), then against each other.
+        let half = 0.5 * self.cell;
+        let inv = 1.0 / self.cell;
+        for (a, &l) in self.large.iter().enumerate() {
+            let s = b[l as usize];
+            let lo = ((s.truncate() - Vec3::splat(s.w + half)) * inv).floor();
+            let hi = ((s.truncate() + Vec3::splat(s.w + half)) * inv).floor();
+            let span = hi - lo + Vec3::ONE;
+            if (span.x * span.y * span.z) as f64 > self.order.len() as f64 {
+                for q in 0..self.order.len() {
+                    if near(s, self.bounds[q]) {
+                        f(l, self.order[q]);
+                    }
+                }
+            } else {
+                let (lo, hi) = (lo.as_ivec3(), hi.as_ivec3());
+                for x in lo.x..=hi.x {
+                    for y in lo.y..=hi.y {
+                        for z in lo.z..=hi.z {
+                            let c = IVec3::new(x, y, z);
+                            for q in self.bucket_range(c) {
+                                if self.cells[q] == c && near(s, self.bounds[q]) {
+                                    f(l, self.order[q]);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            for &m in &self.large[a + 1..] {
+                if near(s, b[m as usize]) {
+                    f(l, m);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,714 @@
+//! Marble–marble collisions (`marble_collisions: true`): broad phase, exact
+//! sphere–sphere narrow phase, the collision cascade and the contact solver. The method,
+//! its reasoning and its figures are in `docs/pair-solver.md`; the physics in
+//! `docs/PHYSICS.md` §6.
+//!
+//! Two marbles meeting is the two-body form of equation (1): along the line of centres
+//! `n`, closing speed `u = (v₂ − v₁)·n`, impulse `J = −(1 + e) u / (1/m₁ + 1/m₂)`. That is
+//! exact for an isolated impact, but marbles come in crowds: a Newton's cradle passes one
+//! impact down a line of touching marbles, and a pile presses every marble against its
+//! neighbours and the floor at once. Two stages per substep handle them, each driving a
+//! [`PairSolver`] through the phases its docs list:
+//!
+//! **Before integration** (stage `PairContacts`), at the substep's start:
+//! 1. **Broad phase** (`grid.rs`, `candidates.rs`): a uniform grid over each marble's sphere
+//!    around its free path, counting-sorted by cell; the pairs found stand for later
+//!    substeps (a Verlet list with a skin of a quarter radius, measured after taking off the
+//!    marbles' common drift), and the few marbles that leave their skins are paired afresh.
+//! 2. **Narrow phase** (`narrow.rs`): exact sphere–sphere. A pair touching at the start is
+//!    judged on its closing speed *before this step's forces*: faster than
+//!    `restitution_threshold` is a collision, otherwise a contact.
+//! 3. **Collisions at the start** (`impacts.rs`) get the two-body equation as a velocity
+//!    change before the step's motion, as a cascade: an impulse that makes a touching
+//!    neighbour (or a board) approach faster than the threshold makes it collide in turn,
+//!    at the same instant. Friction between touching marbles that spin (`friction.rs`).
+//! 4. **Contacts** (`colour.rs`, `rows.rs`, `solve.rs`): every touching pair, every
+//!    speculative pair (apart by a gap it could close during the substep), and those
+//!    marbles' board contacts (recorded, and speculative rows for the pieces they could
+//!    reach) are solved together by projected Gauss–Seidel with warm starting and
+//!    over-relaxation, on the velocities the marbles would reach at the substep's end. The
+//!    pair rows are visited by colour, four at a time in SIMD lanes with the bits of one
+//!    row after another. The impulses become forces over the substep, so every integrator
+//!    moves the marbles consistently with them.
+//! 5. **Overlap** beyond a slop of 0.2% of the smaller radius is projected out of
+//!    positions (`project.rs`), without touching velocities.
+//!
+//! **After the marble–board response** (stage `PairImpacts`), with continuous collision: a
+//! pair that met during the substep finds its time of impact along the relative path, the
+//! root of `|D₀ + (D₁ − D₀) τ| = r₁ + r₂`. If it would end overlapping by more than 5% of
+//! the radius it collides there, through the same cascade; a shallower meeting is left to
+//! the next substep's contact stage, which judges it on the same closing speed. Marbles a
+//! collision sends off their free paths are then checked against the boards and the
+//! marbles they may now meet, in a few rounds (`late.rs`).
+//!
+//! With rolling on, touching marbles that spin also exert Coulomb friction on each other
+//! (impulses at the start of each substep, capped by the contact's last normal impulse).
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+use bevy_ecs::prelude::*;
+use glam::{IVec3, Mat4, Vec3, Vec4};
+
+use crate::board_contact::{BoardSnapshot, Material, Path, TouchList};
+use crate::components::ContactKind;
+use crate::geometry::PieceId;
+
+mod candidates;
+mod colour;
+mod friction;
+mod grid;
+mod impacts;
+mod late;
+mod narrow;
+mod project;
+mod rows;
+mod solve;
+
+use candidates::candidate_pairs;
+pub(crate) use grid::{Grid, KeyMap};
+use narrow::{
+    deep_impact, late_row, late_touch, may_impact_deeply, narrow, near_row, rounding_slack, shallow,
+};
+use rows::{BoardGs, ColourSpan, PairGs, RowBlock, Vel, accumulate, larger};
+use solve::Constraint;
+
+/// Overlap left alone by the position projection, as a fraction of the smaller radius.
+pub const PAIR_SLOP: f32 = 2e-3;
+
+/// Extra room around each marble's free path in the broad phase, as a fraction of its
+/// radius, for the contact forces' change of path.
+const BOUND_MARGIN: f32 = 0.1;
+
+/// Impacts that would leave less overlap than this share of the radius at the end of
+/// the substep are resolved by the next substep's contact stage instead.
+const DISCRETE_OVERLAP: f32 = 0.05;
+
+/// Rounds of looking for what collided marbles run into on their new paths.
+const LATE_ROUNDS: usize = 4;
+
+/// Colours of the pair rows in the contact passes (the last takes every row that finds no
+/// other free, so its rows may share marbles).
+const COLOURS: usize = 32;
+
+/// One marble as the pair stage sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct Body {
+    /// The entity.
+    pub entity: Entity,
+    /// Centre at the end of the substep (after the board response).
+    pub x: Vec3,
+    /// Centre at the substep's start.
+    pub x0: Vec3,
+    /// Velocity at the end of the substep.
+    pub v: Vec3,
+    /// Velocity at the substep's start (before this step's forces).
+    pub v0: Vec3,
+    /// Inverse mass, 1/kg.
+    pub w: f32,
+    /// Radius, m.
+    pub r: f32,
+    /// Restitution.
+    pub e: f32,
+    /// Acceleration over the substep (before contact forces); the contact stage adds the
+    /// contact forces to it.
+    pub a: Vec3,
+    /// Free displacement over the substep under `a`, as the integrator will move it.
+    pub d: Vec3,
+    /// Angular velocity, rad/s (contact stage, marbles that spin).
+    pub omega: Vec3,
+    /// The marble spins (rolling on and it carries an angular velocity): marble–marble
+    /// friction acts on it.
+    pub spins: bool,
+    /// Friction coefficient.
+    pub mu: f32,
+}
+
+/// A contact between two marbles during the last substep.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MarbleContact {
+    /// The first marble.
+    pub a: Entity,
+    /// The second marble.
+    pub b: Entity,
+    /// Unit normal from `a` towards `b`.
+    pub normal: Vec3,
+    /// Overlap at the end of the substep, m (≤ 0: a gap within the touching tolerance).
+    pub depth: f32,
+    /// Closing speed `(v_b − v_a)·n` when classified, m/s (negative: approaching).
+    pub closing_speed: f32,
+    /// Collision (restitution applied) or contact.
+    pub kind: ContactKind,
+    /// When in the substep it was found, s from the substep's start.
+    pub time: f32,
+}
+
+/// The marble–marble contacts of the last substep, in a deterministic order (a resource;
+/// empty unless `marble_collisions` is on). Sleeping marbles ([`crate::sleep`]) are not
+/// stepped, so their contacts are not listed.
+#[derive(Resource, Default, Debug)]
+pub struct MarbleContacts {
+    pub(crate) list: Vec<MarbleContact>,
+}
+
+impl MarbleContacts {
+    /// The contacts.
+    pub fn as_slice(&self) -> &[MarbleContact] {
+        &self.list
+    }
+
+    /// Number of contacts.
+    pub fn len(&self) -> usize {
+        self.list.len()
+    }
+
+    /// True when there are none.
+    pub fn is_empty(&self) -> bool {
+        self.list.is_empty()
+    }
+}
+
+/// A pair of marbles that may interact in this substep.
+#[derive(Clone, Copy, Debug)]
+struct Row {
+    i: u32,
+    j: u32,
+    /// Unit normal from `i` to `j` (at the impact for impacts).
+    n: Vec3,
+    /// Closing speed the collision rule judges (before the step's forces, or at the
+    /// impact), before any impulse of this stage.
+    u: f32,
+    /// When the pair meets, s from the substep's start.
+    t: f32,
+    /// Pair restitution.
+    e: f32,
+    /// `1 / (w_i + w_j)`.
+    k: f32,
+    /// The row collides when closing faster than this, m/s.
+    limit: f32,
+    /// How the pair was found.
+    kind: Found,
+    /// Collided in this substep.
+    collided: bool,
+    /// Gap between the marbles at the substep's start, m ([`Found::Near`] rows; zero for
+    /// the others).
+    gap: f32,
+}
+
+/// How a pair was found by the narrow phase.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Found {
+    /// Touching at the substep's start.
+    Start,
+    /// Apart at the start, meeting during the substep.
+    Impact,
+    /// Apart at the start, within the touching tolerance at the end.
+    End,
+    /// Apart at the start by a gap they could close during the substep: a speculative
+    /// contact of the contact stage, which lets them close the gap but not overlap.
+    Near,
+}
+
+/// A board contact of one marble, copied from its [`crate::components::Contacts`].
+#[derive(Clone, Copy, Debug)]
+pub struct BoardTouch {
+    /// Index of the marble in the bodies.
+    pub body: u32,
+    /// Unit normal out of the board.
+    pub normal: Vec3,
+    /// Contact point on the board at the end of the substep.
+    pub point: Vec3,
+    /// Velocity of the board's surface at the point.
+    pub velocity: Vec3,
+    /// Which piece.
+    pub piece: PieceId,
+    /// Restitution of the marble and board pair.
+    pub restitution: f32,
+    /// Gap at the substep's start, m: 0 for a recorded contact; positive for a
+    /// speculative row (a piece the marble does not touch but could reach during the
+    /// substep), which lets the marble close the gap and no more, and which the collision
+    /// cascade leaves alone.
+    pub gap: f32,
+}
+
+/// The settings the pair stage needs, copied out of [`crate::config::StepConfig`].
+#[derive(Clone, Copy, Debug)]
+pub struct PairParams {
+    /// Substep length, s.
+    pub h: f32,
+    /// Continuous collision.
+    pub ccd: bool,
+    /// Collision-versus-contact threshold, m/s.
+    pub threshold: f32,
+    /// Touching tolerance relative to the radius.
+    pub tolerance: f32,
+    /// Gauss–Seidel passes.
+    pub iterations: u32,
+}
+
+/// The pair stages' state: reusable buffers and the warm-start impulses (a resource).
+///
+/// Both stages drive it in the same four phases, each a call or a loop of calls, and stop
+/// after the first phase that finds nothing to do:
+///
+/// | phase | contact stage (`PairContacts`) | impact stage (`PairImpacts`) |
+/// | --- | --- | --- |
+/// | 1. broad phase | [`begin`](Self::begin); per marble [`push_sphere`](Self::push_sphere) of its [`contact_sphere`](Self::contact_sphere) and [`push_free_path`](Self::push_free_path); [`cover_gathered`](Self::cover_gathered) (false: [`forget_contacts`](Self::forget_contacts), stop) | [`begin`](Self::begin); per marble [`push_sphere`](Self::push_sphere) of its [`impact_sphere`](Self::impact_sphere); [`cover_gathered`](Self::cover_gathered) (false: stop) |
+/// | 2. bodies | [`clear_bodies`](Self::clear_bodies), per marble [`push_body_on_free_path`](Self::push_body_on_free_path) (at the substep's start), [`find_touching`](Self::find_touching) (false: stop) | [`clear_bodies`](Self::clear_bodies), per marble [`push_body`](Self::push_body) (start and end of the substep), [`find_impacts`](Self::find_impacts) (false: stop) |
+/// | 3. board contacts | [`begin_board_touches`](Self::begin_board_touches); per marble [`next_body_touches`](Self::next_body_touches) then, if [`in_rows`](Self::in_rows), its [`push_board_touch`](Self::push_board_touch)es; [`end_board_touches`](Self::end_board_touches) | the same, every marble |
+/// | 4. solve | [`solve_touching`](Self::solve_touching) | [`resolve_impacts`](Self::resolve_impacts) |
+///
+/// Then [`changed_body`](Self::changed_body) gives each marble whose state the stage
+/// changed. Marbles are pushed in the same order in every phase.
+#[derive(Resource, Default, Debug)]
+pub struct PairSolver {
+    /// The marbles of the current substep.
+    bodies: Vec<Body>,
+    /// Their board contacts, grouped by body in body order.
+    board_touches: Vec<BoardTouch>,
+    /// Start of each body's board contacts in `board_touches` (one more entry than
+    /// bodies).
+    touch_start: Vec<u32>,
+    /// The bound spheres the candidate pairs were found on (each marble's sphere when
+    /// they were found, grown by the skin), and the grid over them.
+    bound: Vec<Vec4>,
+    grid: Grid,
+    /// The candidates stand for these bodies (cleared when the bodies change).
+    skin_valid: bool,
+    /// This substep's spheres (scratch of [`PairSolver::cover`]).
+    spheres: Vec<Vec4>,
+    /// With the spheres: each body's radius and entity.
+    radii: Vec<f32>,
+    gathered: Vec<Entity>,
+    /// The contact stage's free displacements, kept from the sphere gather for the bodies.
+    paths: Vec<Vec3>,
+    /// Per body: outside its bound at the last cover, and the list of those.
+    stray: Vec<bool>,
+    strays: Vec<u32>,
+    /// Candidate pairs of strays found at the last cover.
+    extra: Vec<(u32, u32)>,
+    /// The marbles' common drift since the candidates were found, at the last cover.
+    drift: Vec3,
+    /// A second grid (strays against each other; every marble after collisions).
+    scratch_bound: Vec<Vec4>,
+    scratch_grid: Grid,
+    rows: Vec<Row>,
+    /// Collision stage: velocity change and time of the last impact per body.
+    dv: Vec<Vec3>,
+    event: Vec<f32>,
+    /// The rows' pairs by their first body (`i < j`): the `j`s of body `i` are
+    /// `known[known_start[i]..known_start[i + 1]]` (a handful in a pile), so that asking
+    /// whether a pair is known is a short scan of one body's slice, not a search of all.
+    known_start: Vec<u32>,
+    known: Vec<u32>,
+    /// Bodies a collision moved off their free paths.
+    moved: Vec<u32>,
+    /// Those and the strays the collisions did not move, paired through a grid of their
+    /// own when there are many.
+    late_bodies: Vec<u32>,
+    candidates: Vec<(u32, u32)>,
+    /// The bodies' entities when the candidates were found.
+    entities: Vec<Entity>,
+    late: Vec<Row>,
+    adjacency_start: Vec<u32>,
+    adjacency: Vec<u32>,
+    queue: Vec<u32>,
+    first: Vec<u32>,
+    /// Contact stage.
+    constraints: Vec<Constraint>,
+    in_contact: Vec<bool>,
+    warm: KeyMap,
+    warm_next: KeyMap,
+    /// Velocities and inverse masses in the passes.
+    vel: Vec<Vel>,
+    /// Projection each marble may still move this substep.
+    push_left: Vec<f32>,
+    pair_gs: Vec<PairGs>,
+    /// The pair rows in the order the passes visit them (by colour: no two rows of a
+    /// colour share a marble), and each row's slot there.
+    pair_pass: Vec<PairGs>,
+    pair_slot: Vec<u32>,
+    /// The colours' rows by four ([`RowBlock`]), the first slot of each block, and where
+    /// each colour's blocks and single rows are.
+    blocks: Vec<RowBlock>,
+    block_first: Vec<u32>,
+    spans: Vec<ColourSpan>,
+    /// Colours used by each marble's rows so far (a bit per colour).
+    colours: Vec<u32>,
+    board_gs: Vec<BoardGs>,
+    /// Bodies whose state the stage changed.
+    changed: Vec<bool>,
+    /// Marble count the buffers were sized for.
+    reserved_for: usize,
+    /// Test only: check every late-pair search against re-pairing every marble, and count
+    /// the checks by search.
+    #[cfg(test)]
+    cross_check_late: bool,
+    #[cfg(test)]
+    cross_checked: [usize; 3],
+}
+
+impl PairSolver {
+    /// Each stage starts with the broad phase on one sphere per marble, gathered before
+    /// the bodies are: [`PairSolver::begin`], then [`PairSolver::push_sphere`] for every
+    /// marble in the order its body will have, then [`PairSolver::cover_gathered`]. A
+    /// substep in which no two marbles can meet (marbles spread over a board) ends there,
+    /// without building the bodies. `n` is the number of marbles; `out` (the stage's
+    /// records) is only sized.
+    pub fn begin(&mut self, n: usize, out: &mut MarbleContacts) {
+        if n > self.reserved_for {
+            self.reserve(n, out);
+        }
+        self.spheres.clear();
+        self.radii.clear();
+        self.gathered.clear();
+        self.paths.clear();
+    }
+
+    /// A marble's broad-phase sphere (centre, radius), its radius and entity.
+    #[inline]
+    pub fn push_sphere(&mut self, entity: Entity, sphere: Vec4, r: f32) {
+        self.spheres.push(sphere);
+        self.radii.push(r);
+        self.gathered.push(entity);
+    }
+
+    /// The contact stage's free displacement of the marble whose sphere was pushed last
+    /// (its integrator's displacement along the boards it rests on), kept for its body.
+    #[inline]
+    pub fn push_free_path(&mut self, d: Vec3) {
+        self.paths.push(d);
+    }
+
+    /// Phase 2: forgets the last substep's bodies.
+    pub fn clear_bodies(&mut self) {
+        self.bodies.clear();
+    }
+
+    /// Phase 2: the next marble, in the order of its sphere.
+    #[inline]
+    pub fn push_body(&mut self, body: Body) {
+        self.bodies.push(body);
+    }
+
+    /// Phase 2 of the contact stage: the next marble, its [`Body::d`] the free path pushed
+    /// with its sphere ([`PairSolver::push_free_path`]).
+    #[inline]
+    pub fn push_body_on_free_path(&mut self, mut body: Body) {
+        body.d = self.paths[self.bodies.len()];
+        self.bodies.push(body);
+    }
+
+    /// Body `k`, as the stage left it.
+    #[inline]
+    pub fn body(&self, k: usize) -> &Body {
+        &self.bodies[k]
+    }
+
+    /// Body `k` if the stage changed its state (position, velocity, acceleration or spin),
+    /// to be written back to its marble.
+    #[inline]
+    pub fn changed_body(&self, k: usize) -> Option<&Body> {
+        self.changed[k].then(|| &self.bodies[k])
+    }
+
+    /// Whether body `k` is in a pair row of the contact stage, so that the passes need its
+    /// board contacts (after [`PairSolver::find_touching`]).
+    #[inline]
+    pub fn in_rows(&self, k: usize) -> bool {
+        self.in_contact[k]
+    }
+
+    /// Phase 3: forgets the last substep's board contacts.
+    pub fn begin_board_touches(&mut self) {
+        self.board_touches.clear();
+        self.touch_start.clear();
+    }
+
+    /// Phase 3: the board contacts pushed from here on belong to the next body (called
+    /// once per body, in body order, whether or not it has any).
+    #[inline]
+    pub fn next_body_touches(&mut self) {
+        self.touch_start.push(self.board_touches.len() as u32);
+    }
+
+    /// Phase 3: a board contact of the current body.
+    #[inline]
+    pub fn push_board_touch(&mut self, touch: BoardTouch) {
+        self.board_touches.push(touch);
+    }
+
+    /// Phase 3: every body's board contacts are in.
+    pub fn end_board_touches(&mut self) {
+        self.touch_start.push(self.board_touches.len() as u32);
+        debug_assert_eq!(self.touch_start.len(), self.bodies.len() + 1);
+    }
+
+    /// The broad phase on the gathered spheres (module docs, step 1); whether any two
+    /// marbles can meet.
+    pub fn cover_gathered(&mut self) -> bool {
+        self.cover_spheres();
+        !(self.candidates.is_empty() && self.extra.is_empty())
+    }
+
+    /// Drops the contact impulses kept for warm starting (no marble touches another).
+    pub fn forget_contacts(&mut self) {
+        self.warm.clear();
+    }
+
+    /// Copies into `store` the contact impulses kept for warm starting of the marbles whose
+    /// entity bits are in `sorted` (ascending), which fall asleep ([`crate::sleep`]): a
+    /// pair's key starts with its smaller entity, and a marble falls asleep with every
+    /// marble it touches.
+    pub(crate) fn stow_impulses(&self, sorted: &[u64], store: &mut KeyMap) {
+        for (key, &lambda) in &self.warm {
+            if sorted.binary_search(&key.0).is_ok() {
+                store.insert(*key, lambda);
+            }
+        }
+    }
+
+    /// Moves back from `store` the impulses of the marbles in `sorted` (ascending), which
+    /// wake, so that their first substep is warm started as if they had not slept.
+    pub(crate) fn restore_impulses(&mut self, sorted: &[u64], store: &mut KeyMap) {
+        let warm = &mut self.warm;
+        store.retain(|key, lambda| {
+            let woken = sorted.binary_search(&key.0).is_ok();
+            if woken {
+                warm.insert(*key, *lambda);
+            }
+            !woken
+        });
+    }
+
+    /// The contact stage's sphere: around the marble's free path over the substep (its
+    /// displacement `d` from `x`, along the boards it rests on), with a margin for the
+    /// contact forces' change of path and the touching tolerance.
+    #[inline]
+    pub fn contact_sphere(p: &PairParams, x: Vec3, d: Vec3, r: f32) -> Vec4 {
+        let tol = crate::board_contact::touch_tolerance(p.tolerance, r, x);
+        (x + 0.5 * d).extend(r * (1.0 + BOUND_MARGIN) + 0.5 * d.length() + tol)
+    }
+
+    /// The impact stage's sphere: around the straight path from `x0` to `x` and the
+    /// touching tolerance.
+    #[inline]
+    pub fn impact_sphere(p: &PairParams, x0: Vec3, x: Vec3, r: f32) -> Vec4 {
+        let tol = crate::board_contact::touch_tolerance(p.tolerance, r, x);
+        (0.5 * (x0 + x)).extend(r + 0.5 * (x - x0).length() + tol)
+    }
+
+    /// The contact stage, before integration (module docs, steps 1–2), after the broad
+    /// phase on [`PairSolver::contact_sphere`]s, on the bodies at the
+    /// substep's start (`x`, `v`, `a`, `d` set; `x0 = x`, `v0 = v`): finds the touching
+    /// pairs, keeps the candidate pairs for [`PairSolver::find_impacts`], and returns
+    /// whether any pair touches; then [`PairSolver::solve_touching`] needs the board
+    /// contacts.
+    pub fn find_touching(&mut self, p: &PairParams) -> bool {
+        let n = self.bodies.len();
+        debug_assert_eq!(n, self.spheres.len(), "the broad phase ran on these bodies");
+        self.changed.clear();
+        self.changed.resize(n, false);
+        // 2. The touching pairs, and the pairs that could close their gap this substep.
+        self.rows.clear();
+        for (i, j) in candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays) {
+            if let Some(row) = narrow(&self.bodies, i, j, p) {
+                if row.kind == Found::Start {
+                    self.rows.push(row);
+                }
+            } else if let Some(row) = near_row(&self.bodies, i, j, p) {
+                self.rows.push(row);
+            }
+        }
+        if self.rows.is_empty() {
+            self.warm.clear();
+            return false;
+        }
+        // The marbles in the rows: those whose board contacts, and speculative board rows,
+        // the passes need.
+        self.in_contact.clear();
+        self.in_contact.resize(n, false);
+        for row in &self.rows {
+            self.in_contact[row.i as usize] = true;
+            self.in_contact[row.j as usize] = true;
+        }
+        true
+    }
+
+    /// The rest of the contact stage (module docs, steps 3–5), after
+    /// [`PairSolver::find_touching`] found touching pairs, with
+    /// the board contacts (the previous substep's): collisions
+    /// of touching pairs become velocity changes at the start, contacts become forces added
+    /// to `a`, overlaps are projected out of `x`. Records the touching pairs in `out`.
+    pub fn solve_touching(&mut self, p: &PairParams, out: &mut MarbleContacts) {
+        // 3. Collisions of touching pairs: velocity changes at the start.
+        self.collide(p, false);
+        // Friction between touching marbles that spin.
+        self.friction();
+        // 4. Contacts: forces over the substep.
+        self.solve_contacts(p);
+        // 5. Overlap.
+        self.project();
+        for row in &self.rows {
+            if row.kind == Found::Start {
+                out.list.push(self.contact(row));
+            }
+        }
+    }
+
+    /// The impact stage, after the marble–board response (module docs), on
+    /// the bodies with `x0`, `v0` at the substep's start and `x`, `v` at its
+    /// end: finds the pairs that met during the substep deeply enough to collide now, and
+    /// returns whether there are any; then [`PairSolver::resolve_impacts`] needs the board
+    /// contacts.
+    pub fn find_impacts(&mut self, p: &PairParams) -> bool {
+        let n = self.bodies.len();
+        debug_assert_eq!(n, self.spheres.len(), "the broad phase ran on these bodies");
+        self.changed.clear();
+        self.changed.resize(n, false);
+        self.rows.clear();
+        // The rows are needed only when some pair collides deeply: look for one first,
+        // with the narrow phase only for the pairs that moved far enough apart from each
+        // other to leave a deep overlap ([`may_impact_deeply`]); most substeps of a pile
+        // or of marbles rolling together have none and stop here.
+        let bodies = &self.bodies;
+        let slack = rounding_slack(bodies);
+        let deep = candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays)
+            .filter(|&(i, j)| may_impact_deeply(bodies, i, j, slack))
+            .any(|(i, j)| narrow(bodies, i, j, p).is_some_and(|row| deep_impact(bodies, &row)));
+        if !deep {
+            return false;
+        }
+        let mut any = false;
+        for (i, j) in candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays) {
+            if let Some(mut row) = narrow(&self.bodies, i, j, p) {
+                if row.kind == Found::Impact {
+                    if shallow(&self.bodies, &row) {
+                        // An impact that leaves the pair overlapping by less than a small
+                        // share of the radius is left to the next substep's contact stage,
+                        // which judges it on the same closing speed; resolving it here
+                        // would move a settled pile for nothing.
+                        row.limit = f32::INFINITY;
+                    } else {
+                        any |= row.u < 0.0;
+                    }
+                }
+                if row.kind != Found::End {
+                    self.rows.push(row);
+                }
+            }
+        }
+        debug_assert!(any, "the search above found a deep impact");
+        any
+    }
+
+    /// The rest of the impact stage, after [`PairSolver::find_impacts`] found impacts,
+    /// with the board contacts (this substep's): the pairs
+    /// collide at their time of impact, exactly, and pass the impact on. Records the
+    /// impacts in `out`.
+    pub fn resolve_impacts(
+        &mut self,
+        p: &PairParams,
+        boards: &[BoardSnapshot],
+        out: &mut MarbleContacts,
+    ) {
+        if self.collide(p, true) {
+            // Collisions moved marbles off their free paths; what they run into there,
+            // boards and marbles, is found and resolved in a few rounds.
+            let mut settled = false;
+            for _ in 0..LATE_ROUNDS {
+                self.onto_boards(p, boards);
+                if !self.late_overlaps(p) {
+                    settled = true;
+                    break;
+                }
+            }
+            if !settled {
+                // The last round's collisions may have sent marbles into boards.
+                self.onto_boards(p, boards);
+            }
+        }
+        for row in &self.rows {
+            if row.collided && row.kind != Found::Start {
+                out.list.push(self.contact(row));
+            }
+        }
+    }
+
+    /// The record of a row: its pair, the end overlap, the closing speed judged and when.
+    fn contact(&self, row: &Row) -> MarbleContact {
+        let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
+        MarbleContact {
+            a: a.entity,
+            b: b.entity,
+            normal: row.n,
+            depth: a.r + b.r - (b.x - a.x).length(),
+            closing_speed: row.u,
+            kind: if row.collided {
+                ContactKind::Collision
+            } else {
+                ContactKind::Contact
+            },
+            time: row.t,
+        }
+    }
+
+    /// Sizes every buffer for `n` marbles in a dense pile (a marble touches at most 12
+    /// others; rows count each pair once), so that stepping allocates nothing once the
+    /// number of marbles stops growing.
+    fn reserve(&mut self, n: usize, out: &mut MarbleContacts) {
+        // A settled pile has about 3 touching pairs and 6 candidate pairs per marble (a
+        // marble touches at most 12 others, each pair counted once); marbles touch a
+        // board or two at most, mostly none. Buffers that outgrow this grow once and stay.
+        let pairs = 4 * n + 64;
+        let touches = 2 * n;
+        self.rows.reserve(pairs);
+        self.known.reserve(pairs);
+        self.known_start.reserve(n + 2);
+        self.bodies.reserve(n);
+        self.changed.reserve(n);
+        self.moved.reserve(n);
+        self.late_bodies.reserve(n);
+        self.candidates.reserve(2 * pairs);
+        self.entities.reserve(n);
+        self.late.reserve(n);
+        self.first.reserve(n);
+        self.adjacency.reserve(2 * pairs);
+        self.queue.reserve(pairs);
+        self.constraints.reserve(pairs + touches);
+        self.pair_gs.reserve(pairs);
+        self.pair_pass.reserve(pairs);
+        self.pair_slot.reserve(pairs);
+        self.blocks.reserve(pairs / 4);
+        self.block_first.reserve(pairs / 4);
+        self.spans.reserve(COLOURS);
+        self.colours.reserve(n);
+        self.board_gs.reserve(touches);
+        self.vel.reserve(n);
+        self.push_left.reserve(n);
+        self.warm.reserve(pairs + touches);
+        self.warm_next.reserve(pairs + touches);
+        out.list.reserve(pairs);
+        self.board_touches.reserve(touches);
+        self.touch_start.reserve(n + 1);
+        self.adjacency_start.reserve(n + 1);
+        self.dv.reserve(n);
+        self.event.reserve(n);
+        self.in_contact.reserve(n);
+        self.bound.reserve(n);
+        self.spheres.reserve(n);
+        self.stray.reserve(n);
+        self.radii.reserve(n);
+        self.gathered.reserve(n);
+        self.paths.reserve(n);
+        self.strays.reserve(n);
+        self.extra.reserve(pairs);
+        self.scratch_bound.reserve(n);
+        self.grid.reserve(n);
+        self.scratch_grid.reserve(n);
+        self.reserved_for = n;
+    }
+}
+
+#[cfg(test)]
+mod tests;

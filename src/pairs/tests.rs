@@ -1,0 +1,278 @@
+use super::late::LateSearch;
+use super::*;
+
+/// The grid reports exactly the pairs whose bound spheres overlap, each once, for
+/// mixed sizes (some large) and random positions.
+/// The late-pair searches that look only at the marbles the collisions moved (one by
+/// one, or through a grid of their own) find exactly the pairs that re-pairing every
+/// marble finds, checked at every substep of a pour in which tens to hundreds of
+/// marbles are moved per substep.
+#[test]
+fn late_pair_searches_match_re_pairing_every_marble() {
+    let scene = crate::scenes::pour_box(1200);
+    let mut sim = crate::simulation::Simulation::from_scene(&scene).unwrap();
+    sim.step();
+    sim.world_mut()
+        .resource_mut::<PairSolver>()
+        .cross_check_late = true;
+    for _ in 0..20 {
+        sim.step();
+    }
+    let checked = sim.world().resource::<PairSolver>().cross_checked;
+    eprintln!("late-pair searches checked (direct, own grid): {checked:?}");
+    assert!(
+        checked[LateSearch::Direct as usize] > 0 && checked[LateSearch::OwnGrid as usize] > 0,
+        "both searches ran: {checked:?}"
+    );
+}
+
+/// A fixed pseudo-random sequence in [0, 1) from `seed` (a 32-bit LCG).
+fn uniform(mut seed: u32) -> impl FnMut() -> f32 {
+    move || {
+        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (seed >> 8) as f32 / (1u32 << 24) as f32
+    }
+}
+
+/// The impact stage's screen ([`may_impact_deeply`]) never drops a pair the narrow
+/// phase calls a deep impact: random pairs (radii from 0.1 mm to 10 cm, in ratios to
+/// 100; near the origin and a kilometre out) apart at the start, moved towards each
+/// other by their gap and a few times the depth that counts, or by up to four radii.
+#[test]
+fn the_impact_screen_keeps_every_deep_impact() {
+    let mut uniform = uniform(0x2f6b_51c3);
+    let p = PairParams {
+        h: 1.0 / 240.0,
+        ccd: true,
+        threshold: 0.0,
+        tolerance: 1e-4,
+        iterations: 1,
+    };
+    let (mut deep, mut near_limit, mut screened_out) = (0, 0, 0);
+    for case in 0..200_000 {
+        let mut unit =
+            || Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5).normalize_or(Vec3::X);
+        let (u1, u2, u3) = (unit(), unit(), unit());
+        let ra = 1e-4 * 1e3f32.powf(uniform());
+        let rb = ra * 10f32.powf(2.0 * uniform() - 1.0);
+        let origin = if case % 4 == 0 { 1e3 * u1 } else { 0.1 * u1 };
+        // Apart at the start by up to the depth that counts or up to a diameter, then
+        // moved towards each other (roughly along the line of centres) by the gap
+        // and from minus one to two times the depth that counts more, or by up to
+        // four radii.
+        let limit = DISCRETE_OVERLAP * ra.min(rb);
+        let gap = 2e-4 * (ra + rb)
+            + if case % 3 == 0 {
+                (ra + rb) * uniform()
+            } else {
+                limit * uniform()
+            };
+        let (x0a, x0b) = (origin, origin + (ra + rb + gap) * u2);
+        let travel = if case % 2 == 0 {
+            (gap + limit * (3.0 * uniform() - 1.0)).max(0.0)
+        } else {
+            gap + 4.0 * ra.max(rb) * uniform()
+        };
+        let towards = (-(u2 + 0.3 * u3)).normalize();
+        let body = |x0: Vec3, x: Vec3, r: f32| Body {
+            entity: Entity::from_raw_u32(1).unwrap(),
+            x,
+            x0,
+            v: (x - x0) / p.h,
+            v0: (x - x0) / p.h,
+            w: 1.0,
+            r,
+            e: 0.5,
+            a: Vec3::ZERO,
+            d: Vec3::ZERO,
+            omega: Vec3::ZERO,
+            spins: false,
+            mu: 0.0,
+        };
+        let bodies = [body(x0a, x0a, ra), body(x0b, x0b + travel * towards, rb)];
+        let kept = may_impact_deeply(&bodies, 0, 1, rounding_slack(&bodies));
+        screened_out += usize::from(!kept);
+        if let Some(row) = narrow(&bodies, 0, 1, &p)
+            && deep_impact(&bodies, &row)
+        {
+            deep += 1;
+            near_limit += usize::from(travel - gap < 2.0 * limit);
+            assert!(kept, "case {case}: a deep impact screened out: {row:?}");
+        }
+    }
+    assert!(
+        deep > 10_000 && near_limit > 1_000 && screened_out > 10_000,
+        "all kinds of pair exercised: {deep} deep ({near_limit} near the limit), \
+         {screened_out} screened out"
+    );
+}
+
+/// Four rows of a colour updated together in SIMD lanes give bit for bit what the
+/// rows give one after another: velocities, impulses and the running maximum, over
+/// random rows, masses, impulses (zero ones among them) and velocities.
+#[test]
+fn row_blocks_are_four_single_rows() {
+    let mut uniform = uniform(0x9e37_79b9);
+    let mut rnd = move || uniform() * 2.0 - 1.0;
+    for _ in 0..2000 {
+        let vel: Vec<Vel> = (0..8)
+            .map(|_| Vec4::new(rnd(), rnd(), rnd(), 1.0 + 100.0 * rnd().abs()))
+            .collect();
+        // Marbles 0..4 against 4..8 in a shuffled order: no two rows share a marble.
+        let rows: [PairGs; 4] = std::array::from_fn(|k| {
+            let n = Vec3::new(rnd(), rnd(), rnd()).normalize();
+            let (i, j) = (k as u32, 4 + ((k as u32 + 1) % 4));
+            PairGs {
+                i,
+                j,
+                n,
+                k: 1.0 / (vel[i as usize].w + vel[j as usize].w),
+                lambda: if rnd() > 0.0 { 0.0 } else { rnd().abs() },
+                target: 0.1 * rnd(),
+            }
+        });
+        let (mut one, mut rows_one, mut largest) = (vel.clone(), rows, 0.0f32);
+        for r in &mut rows_one {
+            largest = r.pass(&mut one, largest);
+        }
+        let (mut four, mut block) = (vel.clone(), RowBlock::new(&rows));
+        let wide = block.pass(&mut four, Vec4::ZERO);
+        let bits = |v: &[Vel]| {
+            v.iter()
+                .map(|v| v.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&one), bits(&four));
+        let lambdas = rows_one.map(|r| r.lambda.to_bits());
+        assert_eq!(lambdas, block.lambda.to_array().map(f32::to_bits));
+        assert_eq!(largest.to_bits(), wide.max_element().to_bits());
+    }
+}
+
+#[test]
+fn grid_pairs_match_brute_force() {
+    let mut dense = 0;
+    let mut rnd = uniform(12345);
+    // Spread wide (hashed cells) and packed (the dense table).
+    for case in 0..40 {
+        let spread = if case % 2 == 0 { 1.0 } else { 0.15 };
+        let n = 50 + 30 * (case / 2);
+        let b: Vec<Vec4> = (0..n)
+            .map(|k| {
+                let r = if k % 37 == 0 {
+                    0.2
+                } else {
+                    0.01 + 0.01 * rnd()
+                };
+                let p = spread * (Vec3::new(rnd(), 0.3 * rnd(), rnd()) - 0.5);
+                p.extend(r)
+            })
+            .collect();
+        let mut grid = Grid::default();
+        grid.build(&b);
+        dense += grid.dense.is_some() as usize;
+        let mut found = Vec::new();
+        grid.pairs(&b, |i, j| found.push((i.min(j), i.max(j))));
+        let len = found.len();
+        found.sort_unstable();
+        found.dedup();
+        assert_eq!(found.len(), len, "case {case}: a pair reported twice");
+        let mut want = Vec::new();
+        for i in 0..n {
+            for j in i + 1..n {
+                let (p, q) = (b[i], b[j]);
+                let r = p.w + q.w;
+                if (p.truncate() - q.truncate()).length_squared() <= r * r {
+                    want.push((i as u32, j as u32));
+                }
+            }
+        }
+        assert_eq!(found, want, "case {case}");
+    }
+    assert!(
+        dense > 0 && dense < 40,
+        "both modes exercised: {dense} dense"
+    );
+}
+
+/// Over many substeps of marbles drifting together, jittering, a few jumping far and
+/// one leaving, the candidate pairs of [`PairSolver::cover`] hold every pair whose
+/// spheres overlap, each once, while the skin is kept (strays paired on their own)
+/// and rebuilt.
+#[test]
+fn kept_candidates_cover_every_overlapping_pair() {
+    let mut uniform = uniform(99);
+    let mut rnd = move || uniform() - 0.5;
+    let r = 0.008;
+    let mut solver = PairSolver::default();
+    let n = 600;
+    solver.bodies = (0..n)
+        .map(|k| {
+            let x = Vec3::new(rnd(), 0.3 * rnd(), rnd()) * 0.5;
+            Body {
+                entity: Entity::from_raw_u32(k as u32 + 1).unwrap(),
+                x,
+                x0: x,
+                v: Vec3::ZERO,
+                v0: Vec3::ZERO,
+                w: 1.0,
+                r: if k % 50 == 0 { 4.0 * r } else { r },
+                e: 0.5,
+                a: Vec3::ZERO,
+                d: Vec3::ZERO,
+                omega: Vec3::ZERO,
+                spins: false,
+                mu: 0.5,
+            }
+        })
+        .collect();
+    let (mut kept, mut with_strays) = (0, 0);
+    for step in 0..200 {
+        let drift = Vec3::new(0.004, -0.001, 0.002);
+        for (k, b) in solver.bodies.iter_mut().enumerate() {
+            let jitter = Vec3::new(rnd(), rnd(), rnd()) * 0.0008;
+            b.x += drift + jitter;
+            if (k + step) % 97 == 0 {
+                b.x += Vec3::new(rnd(), rnd(), rnd()) * 0.05;
+            }
+        }
+        if step == 150 {
+            solver.bodies.pop();
+        }
+        let was_valid = solver.skin_valid && solver.bound.len() == solver.bodies.len();
+        solver.cover(|b| b.x.extend(1.1 * b.r));
+        kept += usize::from(was_valid && solver.drift != Vec3::ZERO);
+        with_strays += usize::from(!solver.strays.is_empty());
+        let mut found: Vec<(u32, u32)> = candidate_pairs(
+            &solver.candidates,
+            &solver.extra,
+            &solver.stray,
+            &solver.strays,
+        )
+        .collect();
+        let mut overlapping = Vec::new();
+        let b = &solver.bodies;
+        for i in 0..b.len() {
+            for j in i + 1..b.len() {
+                let reach = 1.1 * (b[i].r + b[j].r);
+                if (b[i].x - b[j].x).length() <= reach {
+                    overlapping.push((i as u32, j as u32));
+                }
+            }
+        }
+        let len = found.len();
+        found.sort_unstable();
+        found.dedup();
+        assert_eq!(found.len(), len, "step {step}: a pair reported twice");
+        for pair in overlapping {
+            assert!(
+                found.binary_search(&pair).is_ok(),
+                "step {step}: {pair:?} missed"
+            );
+        }
+    }
+    assert!(
+        kept > 100 && with_strays > 50,
+        "kept {kept}, with strays {with_strays}"
+    );
+}

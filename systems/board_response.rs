@@ -1,0 +1,123 @@
+//! Marble–board response: the event loop for the marbles detection flagged.
+
+use bevy_ecs::prelude::*;
+
+use super::{
+    BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped, smooth_material,
+};
+use crate::board_contact::{
+    BoardCache, BoardSnapshot, NearPieces, TouchList, gather, touch_tolerance,
+};
+#[cfg(doc)]
+use crate::components::AngularVelocity;
+use crate::components::{Contacts, Pending, compensated_add};
+use crate::config::{StepConfig, Substep};
+use crate::response::{Found, MarbleIn, MarbleOut, SubstepParams, resolve};
+
+/// Resolves every flagged marble that does not spin through the substep's event loop
+/// ([`crate::response`]): equation (1) for collisions, removal of approaching velocity for
+/// contacts, continuous collision, and position correction without added energy. Marbles
+/// detection did not flag keep their free motion.
+pub fn respond_to_boards(
+    config: Res<StepConfig>,
+    substep: Res<Substep>,
+    cache: Res<BoardCache>,
+    mut marbles: Query<BoardStaged, Smooth>,
+) {
+    let boards = cache.boards.as_slice();
+    let params = SubstepParams::from_config(&config, substep.h);
+    let each = |touches: &mut TouchList, mut m: BoardStagedItem<'_, '_>| {
+        if m.contacts.pending == Pending::None {
+            return;
+        }
+        let marble = MarbleIn {
+            x0: m.start.position,
+            v0: m.start.velocity,
+            w0: None,
+            a: m.acceleration.0,
+            r: m.radius.0,
+            material: smooth_material(m.restitution),
+        };
+        let out = respond_one(boards, &m.near, &params, &marble, &mut m.contacts, touches);
+        (m.position.0, m.carry.0) =
+            compensated_add(config.compensated, m.start.position, m.start.carry, out.d);
+        m.velocity.0 = out.v;
+    };
+    super::for_each_marble!(marbles, each);
+}
+
+/// [`respond_to_boards`] for marbles that carry an [`AngularVelocity`]: with rolling on,
+/// they spin, with friction, rolling resistance and spin damping at their contacts; with
+/// it off they are smooth like the others. A scene without spinning marbles gives this
+/// system nothing to iterate.
+pub fn respond_to_boards_spinning(
+    config: Res<StepConfig>,
+    substep: Res<Substep>,
+    cache: Res<BoardCache>,
+    mut marbles: Query<(BoardStaged, SpinStaged), Stepped>,
+) {
+    let boards = cache.boards.as_slice();
+    let params = SubstepParams::from_config(&config, substep.h);
+    let each = |touches: &mut TouchList,
+                (mut m, mut s): (BoardStagedItem<'_, '_>, SpinStagedItem<'_, '_>)| {
+        if m.contacts.pending == Pending::None {
+            return;
+        }
+        let marble = MarbleIn {
+            x0: m.start.position,
+            v0: m.start.velocity,
+            w0: config.rolling.then_some(s.spin.0),
+            a: m.acceleration.0,
+            r: m.radius.0,
+            material: s.material(m.restitution),
+        };
+        let out = respond_one(boards, &m.near, &params, &marble, &mut m.contacts, touches);
+        (m.position.0, m.carry.0) =
+            compensated_add(config.compensated, m.start.position, m.start.carry, out.d);
+        m.velocity.0 = out.v;
+        if config.rolling {
+            s.spin.0 = out.w;
+        }
+    };
+    super::for_each_marble!(marbles, each);
+}
+
+/// One flagged marble: the touches detection recorded (gathered again only if it ran out
+/// of room), then the event loop.
+fn respond_one(
+    boards: &[BoardSnapshot],
+    near: &NearPieces,
+    params: &SubstepParams,
+    marble: &MarbleIn,
+    contacts: &mut Contacts,
+    touches: &mut TouchList,
+) -> MarbleOut {
+    let found = match contacts.pending {
+        Pending::Touching { complete } => {
+            if contacts.len() < crate::components::MAX_CONTACTS {
+                touches.clear();
+                for c in contacts.iter() {
+                    touches.push_recorded(c, boards, &marble.material);
+                }
+                touches.set_complete(complete);
+            } else {
+                let tol = touch_tolerance(params.tolerance, marble.r, marble.x0);
+                gather(
+                    boards,
+                    Some(near),
+                    0.0,
+                    marble.x0,
+                    marble.r,
+                    tol,
+                    &marble.material,
+                    -marble.v0,
+                    touches,
+                );
+            }
+            Found::Touching
+        }
+        Pending::Impact(tau) => Found::Impact(tau),
+        Pending::Overlap | Pending::None => Found::Overlap,
+    };
+    resolve(boards, Some(near), params, marble, found, touches, contacts)
+}
