@@ -8,9 +8,12 @@
 //! All quantities are SI: metres, seconds, kilograms, radians.
 
 use bevy_ecs::prelude::*;
+#[cfg(feature = "bevy")]
+use bevy_ecs::reflect::ReflectComponent;
 use glam::{Quat, Vec3};
 
 use crate::geometry::BoardGeometry;
+use crate::scene::{SceneError, ShapeDesc};
 
 /// Default marble radius: 8 mm, a common glass marble.
 pub const DEFAULT_RADIUS: f32 = 0.008;
@@ -21,6 +24,7 @@ macro_rules! vec3_newtype {
     ($(#[$doc:meta])* $name:ident) => {
         $(#[$doc])*
         #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+        #[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
         pub struct $name(pub Vec3);
 
         impl core::ops::Deref for $name {
@@ -69,6 +73,7 @@ vec3_newtype!(
 
 /// Orientation (unit quaternion, local → world) of a board, or of a marble that rolls.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct Rotation(pub Quat);
 
 impl Default for Rotation {
@@ -78,9 +83,14 @@ impl Default for Rotation {
 }
 
 /// Marks a marble: a solid sphere moved by forces and contacts.
+///
+/// Spawned without a [`Position`], it starts at its `Transform`'s translation (with the
+/// `bevy` feature), or at the origin.
 #[derive(Component, Clone, Copy, Debug, Default)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
+#[component(on_add = resolve_unset_pose)]
 #[require(
-    Position,
+    Position = Position::UNSET,
     Velocity,
     Force,
     Acceleration,
@@ -117,9 +127,104 @@ pub fn compensated_add(compensated: bool, sum: Vec3, carry: Vec3, delta: Vec3) -
 }
 
 /// Marks a board: a kinematic body with a [`Collider`] shape.
+///
+/// Spawned without a [`Position`] or [`Rotation`], it takes its `Transform`'s translation
+/// and rotation (with the `bevy` feature), or the origin and no rotation.
 #[derive(Component, Clone, Copy, Debug, Default)]
-#[require(Position, Rotation, Velocity, AngularVelocity, Restitution, Friction)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
+#[component(on_add = resolve_unset_pose)]
+#[require(
+    Position = Position::UNSET,
+    Rotation = Rotation::UNSET,
+    Velocity,
+    AngularVelocity,
+    Restitution,
+    Friction
+)]
 pub struct Board;
+
+/// Marks a sensor: a volume (its [`Collider`], at its pose) that marbles pass through
+/// untouched. A marble enters it when its centre moves inside the volume and exits when
+/// its centre leaves; the step reports both ([`crate::events`]). Goals, holes and
+/// fall-out zones are sensors. A sensor's pose comes from its [`Position`] and
+/// [`Rotation`], or, when spawned without them, from its `Transform`; it moves only when
+/// the program moves it.
+///
+/// A point is inside a cuboid, a bowl's sphere below its rim, a half-space (below its
+/// plane), a height field (below its surface) or a closed triangle mesh (enclosed by it);
+/// a compound sensor is the union of its parts.
+#[derive(Component, Clone, Copy, Debug, Default)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
+#[component(on_add = resolve_unset_pose)]
+#[require(Position = Position::UNSET, Rotation = Rotation::UNSET)]
+pub struct Sensor;
+
+/// Drives a board to a pose over the next physics step: during the step the board moves
+/// with the constant linear and angular velocity (about its [`Position`]) that bring it
+/// exactly to `position` and `rotation` at the step's end, so marbles on it are carried
+/// and launched as by any moving board. At the step's end the board is placed exactly at
+/// the pose, its [`Velocity`] and [`AngularVelocity`] are set to zero and the component
+/// is removed: the board holds still there until a new `NextPose` (or velocity) is given.
+/// Tilting a labyrinth from player input is one `NextPose` per fixed step.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
+pub struct NextPose {
+    /// Where the board's origin is at the step's end, world frame, m.
+    pub position: Vec3,
+    /// The board's orientation at the step's end.
+    pub rotation: Quat,
+}
+
+/// The bits of the "not given" value of [`Position::UNSET`] and [`Rotation::UNSET`]: a
+/// quiet NaN with a payload no arithmetic produces, so a NaN from a program is never
+/// taken for it.
+const UNSET_BITS: u32 = 0x7fc5_1a7e;
+
+impl Position {
+    /// The value `Marble`, `Board` and `Sensor` require when no `Position` is given,
+    /// replaced as soon as the entity is spawned (see [`Marble`]); never seen by a stage.
+    pub const UNSET: Position = Position(Vec3::splat(f32::from_bits(UNSET_BITS)));
+
+    fn is_unset(&self) -> bool {
+        self.0.x.to_bits() == UNSET_BITS
+    }
+}
+
+impl Rotation {
+    /// The value `Board` and `Sensor` require when no `Rotation` is given, replaced as soon
+    /// as the entity is spawned (see [`Board`]); never seen by a stage.
+    pub const UNSET: Rotation =
+        Rotation(Quat::from_xyzw(f32::from_bits(UNSET_BITS), 0.0, 0.0, 1.0));
+
+    fn is_unset(&self) -> bool {
+        self.0.x.to_bits() == UNSET_BITS
+    }
+}
+
+/// Hook of [`Marble`], [`Board`] and [`Sensor`]: a pose left unset takes the entity's
+/// `Transform` (with the `bevy` feature) or the origin and no rotation.
+fn resolve_unset_pose(
+    mut world: bevy_ecs::world::DeferredWorld,
+    context: bevy_ecs::lifecycle::HookContext,
+) {
+    let entity = context.entity;
+    #[cfg(feature = "bevy")]
+    let (translation, rotation) = world
+        .get::<bevy_transform::components::Transform>(entity)
+        .map_or((Vec3::ZERO, Quat::IDENTITY), |t| (t.translation, t.rotation));
+    #[cfg(not(feature = "bevy"))]
+    let (translation, rotation) = (Vec3::ZERO, Quat::IDENTITY);
+    if let Some(mut position) = world.get_mut::<Position>(entity)
+        && position.is_unset()
+    {
+        position.0 = translation;
+    }
+    if let Some(mut r) = world.get_mut::<Rotation>(entity)
+        && r.is_unset()
+    {
+        r.0 = rotation;
+    }
+}
 
 /// A board's shape (parry3d shapes behind a shared pointer, cheap to clone).
 #[derive(Component, Clone, Debug)]
@@ -130,10 +235,70 @@ impl Collider {
     pub fn new(geometry: BoardGeometry) -> Self {
         Collider(std::sync::Arc::new(geometry))
     }
+
+    /// A shape the scene file can describe, checked as the scene file is (`collider.…`
+    /// names the offending field).
+    pub fn from_desc(desc: &ShapeDesc) -> Result<Self, SceneError> {
+        crate::scene::validate_shape("collider", desc, true)?;
+        Ok(Collider::new(desc.build()))
+    }
+
+    /// The half-space below the local plane y = 0 (outward normal +Y): a floor.
+    pub fn plane() -> Self {
+        Collider::new(ShapeDesc::Plane(crate::scene::PlaneDesc {}).build())
+    }
+
+    /// A solid box centred on the origin, with these half sizes (m, each > 0).
+    pub fn cuboid(half_extents: Vec3) -> Result<Self, SceneError> {
+        Collider::from_desc(&ShapeDesc::Cuboid {
+            half_extents: half_extents.to_array(),
+        })
+    }
+
+    /// A triangle mesh (both faces collide): vertices in the local frame (m) and triangles
+    /// as vertex indices, each of non-zero area.
+    pub fn trimesh(vertices: &[Vec3], indices: &[[u32; 3]]) -> Result<Self, SceneError> {
+        Collider::from_desc(&ShapeDesc::TriMesh {
+            vertices: vertices.iter().map(|v| v.to_array()).collect(),
+            indices: indices.to_vec(),
+        })
+    }
+
+    /// A height field centred on the origin: `heights[i][j]`, row i along Z and column j
+    /// along X (at least 2 × 2, rectangular, finite), spanning `scale.x` × `scale.z` with
+    /// heights multiplied by `scale.y` (each > 0).
+    pub fn heightfield(heights: Vec<Vec<f32>>, scale: Vec3) -> Result<Self, SceneError> {
+        Collider::from_desc(&ShapeDesc::HeightField {
+            heights,
+            scale: scale.to_array(),
+        })
+    }
+
+    /// A spherical bowl: the lower half (y ≤ 0) of the sphere of this radius (m, > 0)
+    /// about the origin, as a surface (both faces collide).
+    pub fn bowl(radius: f32) -> Result<Self, SceneError> {
+        Collider::from_desc(&ShapeDesc::Bowl { radius })
+    }
+
+    /// Shapes posed in the collider's frame (`(position, rotation, shape)`; no part a
+    /// compound): a board of several parts, such as a floor with walls.
+    pub fn compound(parts: Vec<(Vec3, Quat, ShapeDesc)>) -> Result<Self, SceneError> {
+        Collider::from_desc(&ShapeDesc::Compound(
+            parts
+                .into_iter()
+                .map(|(position, rotation, shape)| crate::scene::PartDesc {
+                    shape,
+                    position: position.to_array(),
+                    rotation: rotation.to_array(),
+                })
+                .collect(),
+        ))
+    }
 }
 
 /// Marble radius, metres, > 0. Default 8 mm.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct Radius(pub f32);
 
 impl Default for Radius {
@@ -147,6 +312,7 @@ impl Default for Radius {
 /// The default is a glass sphere of the default radius (5.36 g). Spawn a marble of another
 /// radius with [`Mass::glass`] or [`Mass::new`].
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct Mass {
     mass: f32,
     inverse: f32,
@@ -196,6 +362,7 @@ impl Default for Mass {
 /// Coefficient of restitution in [0, 1]: the ratio of separating to approaching normal
 /// speed in a collision. A pair uses the average of its two parties' values. Default 0.5.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct Restitution(pub f32);
 
 impl Default for Restitution {
@@ -209,17 +376,20 @@ impl Default for Restitution {
 /// `(5/7)·c·g` on level ground. A pair uses the average of its two parties' values.
 /// Default 0 (optional: absent means 0).
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct RollingResistance(pub f32);
 
 /// Spin damping coefficient ≥ 0 (dimensionless), used when rolling is modelled: a torque
 /// `k·N·r` against the spin about the contact normal. A pair uses the average of its two
 /// parties' values. Default 0 (optional: absent means 0).
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct SpinDamping(pub f32);
 
 /// Coulomb friction coefficient ≥ 0, used when rolling is modelled. A pair uses the
 /// average of its two parties' values. Default 0.5.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct Friction(pub f32);
 
 impl Default for Friction {
@@ -306,6 +476,7 @@ pub(crate) enum Pending {
 /// Marks a marble whose position or velocity stopped being finite. Quarantined marbles are
 /// skipped by every stage; nothing else is affected.
 #[derive(Component, Clone, Copy, Debug, Default)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct Quarantined;
 
 const EMPTY_CONTACT: Contact = Contact {
@@ -377,4 +548,30 @@ impl Contacts {
             self.list[shallowest] = contact;
         }
     }
+}
+
+/// Registers the engine's components and resources for reflection (inspectors, scenes).
+#[cfg(feature = "bevy")]
+pub(crate) fn register_types(app: &mut bevy_app::App) {
+    app.register_type::<Position>()
+        .register_type::<Velocity>()
+        .register_type::<Force>()
+        .register_type::<AngularVelocity>()
+        .register_type::<Acceleration>()
+        .register_type::<Rotation>()
+        .register_type::<Marble>()
+        .register_type::<Board>()
+        .register_type::<Sensor>()
+        .register_type::<NextPose>()
+        .register_type::<Radius>()
+        .register_type::<Mass>()
+        .register_type::<Restitution>()
+        .register_type::<RollingResistance>()
+        .register_type::<SpinDamping>()
+        .register_type::<Friction>()
+        .register_type::<Quarantined>()
+        .register_type::<crate::sleep::Sleeping>()
+        .register_type::<crate::sleep::Drowsy>()
+        .register_type::<crate::config::StepConfig>()
+        .register_type::<crate::plugin::PhysicsClock>();
 }

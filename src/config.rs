@@ -1,6 +1,8 @@
 //! The one resource holding every tunable of the step, and the integrators.
 
 use bevy_ecs::prelude::*;
+#[cfg(feature = "bevy")]
+use bevy_ecs::reflect::ReflectResource;
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +28,7 @@ use serde::{Deserialize, Serialize};
 /// integrator's error is the `δ` offset of its velocities and of its free flight
 /// (`½ a h t` in position for the Euler schemes).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect))]
 pub enum Integrator {
     /// Symplectic Euler: velocity first, then position with the new velocity. The default:
     /// cheap and stable; off by `½ g dt t` in free fall.
@@ -180,6 +183,7 @@ fn rk4(x: Vec3, v: Vec3, h: f32, f: impl Fn(Vec3, Vec3) -> Vec3) -> (Vec3, Vec3)
 /// `Simulation` fills it from the scene file; `MarblePhysicsPlugin` inserts the default and
 /// sets `dt` from the app's fixed timestep each step.
 #[derive(Resource, Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Resource))]
 pub struct StepConfig {
     /// Gravity, m/s². Default `(0, −9.81, 0)`; any finite vector.
     pub gravity: Vec3,
@@ -235,10 +239,15 @@ pub struct StepConfig {
     /// [`Sleep::time`] is stopped and skipped by every stage until something wakes it, so a
     /// settled pile costs next to nothing.
     pub sleep: Option<Sleep>,
+    /// Record impacts and contacts that start and end as messages and observer events
+    /// ([`crate::events`]). Default `false` in a [`crate::Simulation`], `true` with the
+    /// Bevy plugin; off, no code runs for them. Sensors report whenever there are any.
+    pub events: bool,
 }
 
 /// When marbles fall asleep ([`StepConfig::sleep`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect))]
 pub struct Sleep {
     /// m/s, > 0: a marble is slow while its speed (and, when it spins, its spin times its
     /// radius) stays below this.
@@ -264,6 +273,7 @@ impl Default for StepConfig {
             marble_collisions: false,
             solver_iterations: 10,
             sleep: None,
+            events: false,
         }
     }
 }

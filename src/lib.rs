@@ -5,6 +5,7 @@
 pub mod board_contact;
 pub mod components;
 pub mod config;
+pub mod events;
 pub mod geometry;
 pub mod output;
 pub mod pairs;
@@ -24,6 +25,11 @@ pub mod study;
 #[path = "../systems/mod.rs"]
 pub mod systems;
 
+/// The README's Rust examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeExamples;
+
 #[cfg(feature = "bevy")]
 pub use plugin::MarblePhysicsPlugin;
 pub use scene::{Scene, SceneError};
@@ -33,13 +39,19 @@ pub use simulation::Simulation;
 pub mod prelude {
     pub use crate::components::{
         AngularVelocity, Board, Collider, Contact, ContactKind, Contacts, Force, Friction, Marble,
-        Mass, Position, Quarantined, Radius, Restitution, Rotation, Velocity,
+        Mass, NextPose, Position, Quarantined, Radius, Restitution, Rotation, Sensor, Velocity,
     };
     pub use crate::config::{GravityTilt, Integrator, Preset, Sleep, StepConfig};
+    pub use crate::events::{
+        ContactEnded, ContactStarted, MarbleImpact, SensorEntered, SensorExited,
+    };
     pub use crate::geometry::{BoardGeometry, PartShape};
     pub use crate::pairs::{MarbleContact, MarbleContacts};
     #[cfg(feature = "bevy")]
-    pub use crate::plugin::MarblePhysicsPlugin;
+    pub use crate::plugin::{
+        MarbleDiagnostics, MarblePhysicsPlugin, MarblePhysicsPlugins, PhysicsClock,
+        TransformInterpolation,
+    };
     pub use crate::scene::{BoardDesc, MarbleDesc, Scene, SceneError, ShapeDesc};
     pub use crate::schedule::{MarbleSubstep, MarbleSystems};
     pub use crate::simulation::Simulation;

@@ -572,7 +572,7 @@ pub fn quat(q: [f32; 4]) -> Quat {
     Quat::from_array(q).normalize()
 }
 
-fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Result<(), SceneError> {
+pub(crate) fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Result<(), SceneError> {
     match shape {
         ShapeDesc::Plane(_) => Ok(()),
         ShapeDesc::Bowl { radius } => positive(&format!("{field}.Bowl.radius"), *radius),

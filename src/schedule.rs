@@ -4,7 +4,9 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::{LogLevel, ScheduleBuildSettings, ScheduleLabel};
 
 use crate::config::{StepConfig, Substep};
-use crate::systems::{board_detection, board_response, boards, forces, integrate, pairs, sleep};
+use crate::systems::{
+    board_detection, board_response, boards, events, forces, integrate, pairs, sleep,
+};
 
 /// The schedule that runs one substep. A step runs it `substeps` times
 /// ([`run_step`]).
@@ -36,10 +38,15 @@ pub enum MarbleSystems {
     /// Marble–marble pairs that meet inside the substep collide at their time of impact
     /// (only with `marble_collisions` on).
     PairImpacts,
+    /// The substep's impacts become [`MarbleImpact`](crate::events::MarbleImpact)
+    /// messages, and its touching pairs are noted (only with `events` on).
+    Events,
     /// Kinematic boards advance.
     MoveBoards,
     /// Last substep only: with sleeping on, put to sleep the groups that have been slow
-    /// long enough ([`crate::sleep`]); clear forces, quarantine non-finite marbles. A step
+    /// long enough ([`crate::sleep`]); clear forces, quarantine non-finite marbles; place
+    /// driven boards at their [`NextPose`](crate::components::NextPose); report contacts
+    /// that started or ended and sensors entered or left ([`crate::events`]). A step
     /// of a still world (every marble asleep, nothing moving: see [`run_step`]) runs only
     /// its first substep, so this stage does not run in it (it would find no awake marble).
     Finish,
@@ -67,6 +74,7 @@ pub fn substep_schedule() -> Schedule {
             MarbleSystems::BoardDetection,
             MarbleSystems::BoardResponse,
             MarbleSystems::PairImpacts,
+            MarbleSystems::Events,
             MarbleSystems::MoveBoards,
             MarbleSystems::Finish,
         )
@@ -74,11 +82,18 @@ pub fn substep_schedule() -> Schedule {
     );
     schedule.add_systems((
         (
+            boards::drive_boards.run_if(sleep::first_substep),
+            crate::events::find_observers
+                .run_if(sleep::first_substep)
+                .run_if(events::watching),
             boards::prepare_boards,
             sleep::wake.run_if(sleep::first_substep),
         )
             .chain()
             .in_set(MarbleSystems::PrepareBoards),
+        events::record_touches
+            .run_if(events::events_on)
+            .in_set(MarbleSystems::Events),
         forces::accumulate_forces.in_set(MarbleSystems::AccumulateForces),
         integrate::integrate.in_set(MarbleSystems::Integrate),
         (
@@ -109,6 +124,9 @@ pub fn substep_schedule() -> Schedule {
             sleep::fall_asleep.run_if(sleep::sleep_on),
             forces::clear_forces,
             forces::quarantine_non_finite,
+            boards::finish_driven_boards,
+            events::finish_touches.run_if(events::events_on),
+            events::update_sensors.run_if(events::any_sensor),
         )
             .chain()
             .in_set(MarbleSystems::Finish)
@@ -129,6 +147,12 @@ pub fn init_resources(world: &mut World) {
     world.init_resource::<crate::pairs::PairSolver>();
     world.init_resource::<crate::pairs::MarbleContacts>();
     world.init_resource::<crate::sleep::SleepState>();
+    world.init_resource::<crate::events::EventState>();
+    world.init_resource::<Messages<crate::events::MarbleImpact>>();
+    world.init_resource::<Messages<crate::events::ContactStarted>>();
+    world.init_resource::<Messages<crate::events::ContactEnded>>();
+    world.init_resource::<Messages<crate::events::SensorEntered>>();
+    world.init_resource::<Messages<crate::events::SensorExited>>();
 }
 
 /// Runs one step: `substeps` runs of the substep schedule through `run_substep`; only

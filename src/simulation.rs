@@ -120,8 +120,10 @@ impl Simulation {
         })
     }
 
-    /// Advances one scene `dt` (all substeps).
+    /// Advances one scene `dt` (all substeps). The messages of the step before stay
+    /// readable through this step ([`crate::events`]); older ones are dropped.
     pub fn step(&mut self) {
+        crate::events::update_messages(&mut self.world);
         let schedule = &mut self.schedule;
         run_step(&mut self.world, |world| schedule.run(world));
         self.steps += 1;

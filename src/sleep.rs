@@ -52,6 +52,8 @@
 //! pushes the two apart. The tests in `tests/sleep.rs` check when marbles fall asleep,
 //! that a settled pile asleep stays bit for bit where it is, and each way of waking.
 use bevy_ecs::prelude::*;
+#[cfg(feature = "bevy")]
+use bevy_ecs::reflect::ReflectComponent;
 use glam::{Vec3, Vec4};
 use parry3d::bounding_volume::Aabb;
 
@@ -66,6 +68,7 @@ use crate::systems::sleep::{fall_asleep, wake};
 /// A marble asleep: every stage skips it until something wakes it (module docs). Remove
 /// it to wake the marble by hand.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct Sleeping {
     /// Where the marble fell asleep: moved elsewhere, it wakes.
     pub(crate) position: Vec3,
@@ -83,6 +86,7 @@ impl Sleeping {
 /// How long a marble has been slow, s (module docs). Added to a marble by the first step
 /// that looks at it with sleeping on.
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 pub struct Drowsy(pub f32);
 /// The sleep stages' state (a resource): the sleeping marbles' spheres in a grid, what
 /// the boards and gravity were at the last step, and reusable buffers.

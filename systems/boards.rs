@@ -6,10 +6,10 @@ use parry3d::bounding_volume::Aabb;
 
 use crate::board_contact::{BoardCache, BoardSnapshot};
 use crate::components::{
-    AngularVelocity, Board, Collider, Friction, Position, Restitution, RollingResistance, Rotation,
-    SpinDamping, Velocity,
+    AngularVelocity, Board, Collider, Friction, NextPose, Position, Restitution, RollingResistance,
+    Rotation, SpinDamping, Velocity,
 };
-use crate::config::Substep;
+use crate::config::{StepConfig, Substep};
 use crate::geometry::transform_aabb;
 
 /// Snapshots every board (pose, motion, bounds swept over the substep) into
@@ -125,4 +125,57 @@ pub fn advance_tilt(substep: Res<Substep>, mut tilt: ResMut<crate::config::Gravi
     let h = substep.h;
     let tilt = tilt.as_mut();
     tilt.rotation = (Quat::from_scaled_axis(tilt.angular_velocity * h) * tilt.rotation).normalize();
+}
+
+/// First substep, before the snapshot: a board with a [`NextPose`] gets the constant
+/// linear and angular velocity (about its position) that bring it to that pose at the
+/// step's end.
+pub fn drive_boards(
+    config: Res<StepConfig>,
+    mut boards: Query<
+        (
+            &Position,
+            &Rotation,
+            &NextPose,
+            &mut Velocity,
+            &mut AngularVelocity,
+        ),
+        With<Board>,
+    >,
+) {
+    let dt = config.dt;
+    for (position, rotation, next, mut velocity, mut angular) in &mut boards {
+        velocity.0 = (next.position - position.0) / dt;
+        // The turn from here to there, the shorter way round, world frame.
+        let mut turn = next.rotation * rotation.0.conjugate();
+        if turn.w < 0.0 {
+            turn = -turn;
+        }
+        angular.0 = turn.to_scaled_axis() / dt;
+    }
+}
+
+/// Last substep, after the boards moved: a driven board is placed exactly at its
+/// [`NextPose`] and holds still there (velocities zero, the component removed).
+pub fn finish_driven_boards(
+    mut commands: Commands,
+    mut boards: Query<
+        (
+            Entity,
+            &NextPose,
+            &mut Position,
+            &mut Rotation,
+            &mut Velocity,
+            &mut AngularVelocity,
+        ),
+        With<Board>,
+    >,
+) {
+    for (entity, next, mut position, mut rotation, mut velocity, mut angular) in &mut boards {
+        position.0 = next.position;
+        rotation.0 = next.rotation.normalize();
+        velocity.0 = Vec3::ZERO;
+        angular.0 = Vec3::ZERO;
+        commands.entity(entity).remove::<NextPose>();
+    }
 }

@@ -52,6 +52,35 @@ fn stepping_does_not_allocate() {
         assert_eq!(allocations_in_100_steps(&mut sim), 0, "{n} marbles");
     }
     a_sleeping_pile_does_not_allocate();
+    events_do_not_allocate();
+}
+
+/// Events on (impacts, contacts started and ended, sensors entered and left) allocate
+/// nothing either once warmed up: 1,000 marbles poured into a box (impacts with the floor,
+/// the walls and each other, contacts coming and going) through a dozen sensors, messages
+/// moved on every step.
+fn events_do_not_allocate() {
+    let scene = scenes::pour_box(1000);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    sim.world_mut().resource_mut::<StepConfig>().events = true;
+    for i in 0..12 {
+        let x = -0.12 + 0.02 * i as f32;
+        sim.world_mut().spawn((
+            Sensor,
+            Collider::cuboid(glam::Vec3::new(0.01, 0.05, 0.2)).unwrap(),
+            Position(glam::Vec3::new(x, 0.05, 0.0)),
+        ));
+    }
+    let mut impacts = 0;
+    for _ in 0..30 {
+        sim.step();
+        impacts += sim
+            .world()
+            .resource::<bevy_ecs::message::Messages<MarbleImpact>>()
+            .len();
+    }
+    assert!(impacts > 0, "the pour has impacts");
+    assert_eq!(allocations_in_100_steps(&mut sim), 0, "a pour with events");
 }
 
 /// Allocations during 100 steps of `sim`.

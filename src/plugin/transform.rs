@@ -1,0 +1,138 @@
+//! `Transform` in and out: where entities start, teleports by the program, and the poses
+//! each step writes back.
+
+use bevy_app::{App, Plugin};
+use bevy_ecs::change_detection::Tick;
+use bevy_ecs::intern::Interned;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleLabel;
+use bevy_ecs::system::SystemChangeTick;
+use bevy_transform::components::Transform;
+
+use super::MarblePluginSystems;
+use super::interpolation::{PhysicsPoses, TransformInterpolation};
+use crate::components::{Board, Marble, Position, Rotation, Sensor};
+
+/// `Transform` in and out.
+///
+/// - An entity spawned with `Marble`, `Board` or `Sensor` and a `Transform` but no
+///   `Position` starts at the `Transform`'s translation (a board or sensor also at its
+///   rotation); given both, `Position` and `Rotation` win. (This is the components' own
+///   spawn hook, so it holds in a plain `World` too.)
+/// - A `Transform` the program changes after spawning moves its entity there before the
+///   next physics step: a **teleport**. The marble keeps its velocity and spin (set them
+///   too for a fresh start); its contacts are found afresh at the new place in the next
+///   substep, a sleeping marble wakes, and an interpolated entity jumps there without a
+///   streak. A teleported board keeps its velocity; marbles it now overlaps are pushed
+///   out. To move a board smoothly, give it a [`NextPose`](crate::components::NextPose).
+/// - After every step, each marble's and board's pose is written into its `Transform`
+///   (a marble's rotation only when it has a `Rotation`); entities with
+///   [`TransformInterpolation`] are eased every frame instead.
+pub struct MarbleTransformPlugin {
+    pub(super) schedule: Interned<dyn ScheduleLabel>,
+}
+
+impl Plugin for MarbleTransformPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<TransformWrites>();
+        app.add_systems(
+            self.schedule,
+            (
+                read_transforms.in_set(MarblePluginSystems::ReadTransforms),
+                sync_transforms.in_set(MarblePluginSystems::SyncTransforms),
+            ),
+        );
+    }
+}
+
+/// The tick of the engine's last write to `Transform`s (a resource): a `Transform` changed
+/// after it was changed by the program.
+#[derive(Resource, Default, Debug)]
+pub struct TransformWrites {
+    pub(super) tick: Tick,
+}
+
+/// Moves every marble, board and sensor whose `Transform` the program changed since the
+/// engine last wrote it to that `Transform` (see [`MarbleTransformPlugin`]).
+#[allow(clippy::type_complexity)]
+pub fn read_transforms(
+    writes: Res<TransformWrites>,
+    ticks: SystemChangeTick,
+    mut entities: Query<
+        (
+            Ref<Transform>,
+            &mut Position,
+            Option<&mut Rotation>,
+            Has<Marble>,
+            Option<&mut PhysicsPoses>,
+        ),
+        (
+            Or<(With<Marble>, With<Board>, With<Sensor>)>,
+            Changed<Transform>,
+        ),
+    >,
+) {
+    for (transform, mut position, rotation, marble, poses) in &mut entities {
+        // Spawned with it (the spawn hook read it), or written by the engine: by the
+        // easing for an interpolated entity, else by the last step's write-back.
+        let by_program = match &poses {
+            Some(poses) => poses.set_by_program(&transform),
+            None => transform
+                .last_changed()
+                .is_newer_than(writes.tick, ticks.this_run()),
+        };
+        if transform.is_added() || !by_program {
+            continue;
+        }
+        position.0 = transform.translation;
+        let mut r = None;
+        if let Some(mut rotation) = rotation {
+            // A marble's orientation is only its spin's bookkeeping; a board's and a
+            // sensor's is their pose.
+            if !marble || rotation.0 != transform.rotation {
+                rotation.0 = transform.rotation;
+            }
+            r = Some(rotation.0);
+        }
+        if let Some(mut poses) = poses {
+            poses.reset(position.0, r.unwrap_or(transform.rotation));
+        }
+    }
+}
+
+/// Writes marble positions (and orientations, for marbles that carry a `Rotation`) and
+/// board poses into their `Transform`s; entities with [`TransformInterpolation`] are left
+/// to the interpolation.
+#[allow(clippy::type_complexity)]
+pub fn sync_transforms(
+    mut writes: ResMut<TransformWrites>,
+    ticks: SystemChangeTick,
+    mut marbles: Query<
+        (&Position, Option<&Rotation>, &mut Transform),
+        (
+            With<Marble>,
+            Without<Board>,
+            Without<TransformInterpolation>,
+        ),
+    >,
+    mut boards: Query<
+        (&Position, &Rotation, &mut Transform),
+        (
+            With<Board>,
+            Without<Marble>,
+            Without<TransformInterpolation>,
+        ),
+    >,
+) {
+    for (position, rotation, mut transform) in &mut marbles {
+        transform.translation = position.0;
+        if let Some(rotation) = rotation {
+            transform.rotation = rotation.0;
+        }
+    }
+    for (position, rotation, mut transform) in &mut boards {
+        transform.translation = position.0;
+        transform.rotation = rotation.0;
+    }
+    writes.tick = ticks.this_run();
+}

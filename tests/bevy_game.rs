@@ -1,0 +1,628 @@
+//! A marble game in a headless Bevy app (`TimePlugin`, manual frame durations, the plugin):
+//! spawning from `Transform`, teleports, collider constructors, impact, contact and sensor
+//! messages and observer events, driven boards, interpolation, pausing, diagnostics and
+//! reflection, each against an exact answer.
+#![cfg(feature = "bevy")]
+
+use std::time::Duration;
+
+use bevy_app::{App, FixedUpdate, Update};
+use bevy_ecs::prelude::*;
+use bevy_marble::prelude::*;
+use bevy_time::{Fixed, Time, TimePlugin, TimeUpdateStrategy};
+use bevy_transform::components::Transform;
+use glam::{Quat, Vec3};
+
+const G: f32 = 9.81;
+/// Bevy's default fixed step.
+const DT: f64 = 1.0 / 64.0;
+
+/// A headless app with the plugin whose frames each last `frame` seconds, with Verlet
+/// (exact in free flight under gravity) so that every figure has an exact answer.
+fn app(frame: f64) -> App {
+    let mut app = App::new();
+    app.add_plugins((TimePlugin, MarblePhysicsPlugin::default()));
+    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        frame,
+    )));
+    app.insert_resource(Time::<Fixed>::from_seconds(DT));
+    app.world_mut().resource_mut::<StepConfig>().integrator = Integrator::VelocityVerlet;
+    app.finish();
+    app.cleanup();
+    // The first update only starts the clock.
+    app.update();
+    app
+}
+
+/// Everything a reader in `Update` saw.
+#[derive(Resource, Default)]
+struct Seen {
+    impacts: Vec<MarbleImpact>,
+    started: Vec<ContactStarted>,
+    ended: Vec<ContactEnded>,
+    entered: Vec<(SensorEntered, u32)>,
+    exited: Vec<(SensorExited, u32)>,
+    /// Fixed steps run so far (counted by a `FixedUpdate` system of the game's own).
+    steps: u32,
+}
+
+fn read_messages(
+    mut seen: ResMut<Seen>,
+    mut impacts: MessageReader<MarbleImpact>,
+    mut started: MessageReader<ContactStarted>,
+    mut ended: MessageReader<ContactEnded>,
+    mut entered: MessageReader<SensorEntered>,
+    mut exited: MessageReader<SensorExited>,
+) {
+    let steps = seen.steps;
+    seen.impacts.extend(impacts.read().copied());
+    seen.started.extend(started.read().copied());
+    seen.ended.extend(ended.read().copied());
+    seen.entered.extend(entered.read().map(|e| (*e, steps)));
+    seen.exited.extend(exited.read().map(|e| (*e, steps)));
+}
+
+fn count_steps(mut seen: ResMut<Seen>) {
+    seen.steps += 1;
+}
+
+/// An app that records every message in `Update` and counts fixed steps.
+fn recording_app(frame: f64) -> App {
+    let mut app = app(frame);
+    app.init_resource::<Seen>();
+    app.add_systems(Update, read_messages);
+    app.add_systems(FixedUpdate, count_steps);
+    app
+}
+
+fn floor(app: &mut App, restitution: f32) -> Entity {
+    app.world_mut()
+        .spawn((Board, Collider::plane(), Restitution(restitution)))
+        .id()
+}
+
+#[test]
+fn marbles_and_boards_start_at_their_transform_and_position_wins() {
+    let mut app = app(DT);
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Transform::from_xyz(0.0, 0.5, 0.0)))
+        .id();
+    let turn = Quat::from_rotation_z(0.3);
+    let board = app
+        .world_mut()
+        .spawn((
+            Board,
+            Collider::cuboid(Vec3::new(1.0, 0.1, 1.0)).unwrap(),
+            Transform::from_xyz(3.0, 0.0, 0.0).with_rotation(turn),
+        ))
+        .id();
+    let both = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Position(Vec3::new(0.0, 2.0, 0.0)),
+            Transform::from_xyz(0.0, 9.0, 0.0),
+        ))
+        .id();
+    let plain = app.world_mut().spawn(Marble).id();
+    let w = app.world();
+    assert_eq!(
+        w.get::<Position>(marble).unwrap().0,
+        Vec3::new(0.0, 0.5, 0.0)
+    );
+    assert_eq!(
+        w.get::<Position>(board).unwrap().0,
+        Vec3::new(3.0, 0.0, 0.0)
+    );
+    assert_eq!(w.get::<Rotation>(board).unwrap().0, turn);
+    assert_eq!(w.get::<Position>(both).unwrap().0, Vec3::new(0.0, 2.0, 0.0));
+    assert_eq!(w.get::<Position>(plain).unwrap().0, Vec3::ZERO);
+    // A step later the marble has fallen from 0.5 (Verlet: ½ g t² exactly) and its
+    // Transform shows it; the one given both kept its Position.
+    app.update();
+    let w = app.world();
+    let y = w.get::<Position>(marble).unwrap().y;
+    let want = 0.5 - 0.5 * G * (DT * DT) as f32;
+    assert!((y - want).abs() <= 1e-6, "y = {y}, want {want}");
+    assert_eq!(w.get::<Transform>(marble).unwrap().translation.y, y);
+    let y2 = w.get::<Position>(both).unwrap().y;
+    assert!((y2 - (2.0 - 0.5 * G * (DT * DT) as f32)).abs() <= 1e-6);
+}
+
+#[test]
+fn a_transform_set_by_the_program_teleports_and_velocity_stays() {
+    let mut app = app(DT);
+    let marble = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Transform::from_xyz(0.0, 1.0, 0.0),
+            Velocity(Vec3::new(1.0, 0.0, 0.0)),
+        ))
+        .id();
+    for _ in 0..5 {
+        app.update();
+    }
+    app.world_mut()
+        .get_mut::<Transform>(marble)
+        .unwrap()
+        .translation = Vec3::new(10.0, 5.0, 0.0);
+    let v = app.world().get::<Velocity>(marble).unwrap().0;
+    app.update();
+    let w = app.world();
+    let p = w.get::<Position>(marble).unwrap().0;
+    let dt = DT as f32;
+    // One Verlet step from the teleport, with the velocity it had.
+    let want = Vec3::new(10.0, 5.0, 0.0) + v * dt + Vec3::new(0.0, -0.5 * G * dt * dt, 0.0);
+    assert!((p - want).length() <= 1e-5, "at {p}, want {want}");
+    // Untouched Transforms (the engine's own writes) are not teleports.
+    app.update();
+    let q = app.world().get::<Position>(marble).unwrap().0;
+    assert!((q.x - (p.x + v.x * dt)).abs() <= 1e-5);
+}
+
+#[test]
+fn collider_constructors_check_their_input() {
+    assert!(Collider::cuboid(Vec3::ONE).is_ok());
+    let err = Collider::cuboid(Vec3::new(-1.0, 1.0, 1.0)).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "collider.Cuboid.half_extents.x must be > 0, got -1"
+    );
+    let tri = [Vec3::ZERO, Vec3::X, Vec3::Z];
+    assert!(Collider::trimesh(&tri, &[[0, 1, 2]]).is_ok());
+    let err = Collider::trimesh(&tri, &[[0, 1, 3]]).unwrap_err();
+    assert!(
+        err.to_string()
+            .starts_with("collider.TriMesh.indices[0][2] must be < 3"),
+        "{err}"
+    );
+    assert!(Collider::heightfield(vec![vec![0.0; 3]; 3], Vec3::ONE).is_ok());
+    let err = Collider::heightfield(vec![vec![0.0; 3]], Vec3::ONE).unwrap_err();
+    assert!(err.to_string().contains("HeightField.heights"), "{err}");
+    assert!(Collider::bowl(0.5).is_ok());
+    assert!(Collider::bowl(0.0).is_err());
+    assert!(Collider::compound(vec![]).is_err());
+    let parts = vec![(
+        Vec3::Y,
+        Quat::IDENTITY,
+        ShapeDesc::Cuboid {
+            half_extents: [1.0, 0.1, 1.0],
+        },
+    )];
+    assert!(Collider::compound(parts).is_ok());
+    let _ = Collider::plane();
+}
+
+/// A marble dropped from h onto a floor: the first impact speed is √(2gh), each next one
+/// e times the last (Verlet's free flight is exact; continuous collision finds each impact
+/// within the touching tolerance, a micrometre, so the speeds are good to about 1e-5); a
+/// `MarbleImpact` for each, read in `Update` and seen by an observer on the marble, the
+/// contact starting at the first impact; none once it rests.
+#[test]
+fn impacts_come_at_the_free_fall_speed_and_shrink_by_e() {
+    let mut app = recording_app(DT);
+    let (h, r, e) = (0.5f32, 0.008f32, 0.5f32);
+    let floor = floor(&mut app, e);
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Restitution(e), Transform::from_xyz(0.0, h + r, 0.0)))
+        .id();
+    #[derive(Resource, Default)]
+    struct Observed(Vec<f32>);
+    app.init_resource::<Observed>();
+    app.world_mut().entity_mut(marble).observe(
+        |impact: On<MarbleImpact>, mut seen: ResMut<Observed>| {
+            seen.0.push(impact.speed);
+        },
+    );
+    for _ in 0..(3.0 / DT) as usize {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    assert!(seen.impacts.len() >= 4, "{} impacts", seen.impacts.len());
+    let v0 = (2.0 * G * h).sqrt();
+    for (n, impact) in seen.impacts.iter().take(4).enumerate() {
+        let want = v0 * e.powi(n as i32);
+        assert!(
+            ((impact.speed - want) / want).abs() <= 1e-4,
+            "impact {n}: {} m/s, want {want}",
+            impact.speed
+        );
+        assert_eq!((impact.marble, impact.other), (marble, floor));
+        assert!((impact.normal - Vec3::Y).length() <= 1e-6);
+        assert!(impact.point.y.abs() <= 1e-5, "point {}", impact.point);
+    }
+    let observed = &app.world().resource::<Observed>().0;
+    let read: Vec<f32> = seen.impacts.iter().map(|i| i.speed).collect();
+    assert_eq!(observed, &read, "observers see what readers read");
+    assert_eq!(
+        seen.started.first(),
+        Some(&ContactStarted {
+            marble,
+            other: floor
+        })
+    );
+    // It rests now: a second more brings no impact.
+    let n = seen.impacts.len();
+    for _ in 0..64 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    assert_eq!(seen.impacts.len(), n, "a resting marble makes no impacts");
+    assert!(app.world().get::<Position>(marble).unwrap().y - r <= 1e-4);
+}
+
+/// Two marbles meeting head-on (no gravity, marble collisions on): one `MarbleImpact` for
+/// the pair at the closing speed 2u, its normal from the other marble towards the first,
+/// its point midway; the contact starts at the impact and ends once they have parted.
+#[test]
+fn a_marble_pair_impact_is_reported_once_at_its_closing_speed() {
+    let mut app = recording_app(DT);
+    {
+        let mut config = app.world_mut().resource_mut::<StepConfig>();
+        config.gravity = Vec3::ZERO;
+        config.marble_collisions = true;
+    }
+    let u = 0.5;
+    let a = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Restitution(1.0),
+            Position(Vec3::new(-0.05, 0.0, 0.0)),
+            Velocity(Vec3::X * u),
+        ))
+        .id();
+    let b = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Restitution(1.0),
+            Position(Vec3::new(0.05, 0.0, 0.0)),
+            Velocity(-Vec3::X * u),
+        ))
+        .id();
+    for _ in 0..16 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    assert_eq!(seen.impacts.len(), 1, "{:?}", seen.impacts);
+    let hit = seen.impacts[0];
+    let (marble, other) = (hit.marble, hit.other);
+    assert!((marble, other) == (a, b) || (marble, other) == (b, a));
+    assert!(
+        ((hit.speed - 2.0 * u) / (2.0 * u)).abs() <= 1e-4,
+        "speed {}",
+        hit.speed
+    );
+    let towards_marble = if marble == a { -Vec3::X } else { Vec3::X };
+    assert!(
+        (hit.normal - towards_marble).length() <= 1e-4,
+        "normal {}",
+        hit.normal
+    );
+    assert!(hit.point.length() <= 1e-3, "point {}", hit.point);
+    assert_eq!(seen.started, vec![ContactStarted { marble, other }]);
+    assert_eq!(seen.ended, vec![ContactEnded { marble, other }]);
+    // Elastic and equal: they swapped velocities.
+    let va = app.world().get::<Velocity>(a).unwrap().0;
+    assert!((va.x + u).abs() <= 1e-4, "{va}");
+}
+
+/// A bounce off the floor and away: ContactStarted at the impact, ContactEnded once the
+/// marble has left, each once and in that order.
+#[test]
+fn a_bounce_starts_and_ends_one_contact() {
+    let mut app = recording_app(DT);
+    let floor = floor(&mut app, 1.0);
+    let marble = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Restitution(1.0),
+            Transform::from_xyz(0.0, 0.1, 0.0),
+            Velocity(Vec3::new(0.0, -1.0, 0.0)),
+        ))
+        .id();
+    for _ in 0..16 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    assert_eq!(seen.impacts.len(), 1);
+    assert_eq!(
+        seen.started,
+        vec![ContactStarted {
+            marble,
+            other: floor
+        }]
+    );
+    assert_eq!(
+        seen.ended,
+        vec![ContactEnded {
+            marble,
+            other: floor
+        }]
+    );
+}
+
+/// A sensor between heights 0.4 and 0.6 m and a marble dropped from rest at 1 m: entered
+/// at the first step that ends with the centre below 0.6 m (t = √(2·0.4/g)) and left at the
+/// first that ends below 0.4 m (t = √(2·0.6/g)), Verlet's positions being exact.
+#[test]
+fn a_sensor_is_entered_and_left_at_the_free_fall_times() {
+    let mut app = recording_app(DT);
+    let sensor = app
+        .world_mut()
+        .spawn((
+            Sensor,
+            Collider::cuboid(Vec3::new(0.5, 0.1, 0.5)).unwrap(),
+            Transform::from_xyz(0.0, 0.5, 0.0),
+        ))
+        .id();
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Transform::from_xyz(0.0, 1.0, 0.0)))
+        .id();
+    for _ in 0..40 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    let step_of = |fall: f32| ((2.0 * fall / G).sqrt() as f64 / DT).ceil() as u32;
+    assert_eq!(
+        seen.entered,
+        vec![(SensorEntered { sensor, marble }, step_of(0.4))]
+    );
+    assert_eq!(
+        seen.exited,
+        vec![(SensorExited { sensor, marble }, step_of(0.6))]
+    );
+    // The marble passed through untouched.
+    assert!(seen.impacts.is_empty());
+    let y = app.world().get::<Position>(marble).unwrap().y;
+    let t = 40.0 * DT as f32;
+    assert!((y - (1.0 - 0.5 * G * t * t)).abs() <= 1e-4);
+}
+
+/// A dozen sensors (a labyrinth's holes) and 200 marbles falling through them: each
+/// marble enters and leaves exactly the sensors its column passes.
+#[test]
+fn many_sensors_report_each_marble_once() {
+    let mut app = recording_app(DT);
+    let mut sensors = Vec::new();
+    for i in 0..12 {
+        let x = i as f32;
+        sensors.push(
+            app.world_mut()
+                .spawn((
+                    Sensor,
+                    Collider::cuboid(Vec3::new(0.3, 0.05, 0.3)).unwrap(),
+                    Position(Vec3::new(x, 0.0, 0.0)),
+                ))
+                .id(),
+        );
+    }
+    for k in 0..200 {
+        let x = (k % 24) as f32 * 0.5;
+        app.world_mut()
+            .spawn((Marble, Position(Vec3::new(x, 0.5 + 0.01 * k as f32, 0.0))));
+    }
+    for _ in 0..64 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    // Marbles at x = 0, 1, …, 11 (every other column) pass through one sensor each.
+    let through = (0..200).filter(|k| k % 2 == 0).count();
+    assert_eq!(seen.entered.len(), through);
+    assert_eq!(seen.exited.len(), through);
+}
+
+/// `NextPose` lifts and turns a board to its pose exactly in one step and leaves it still;
+/// a marble resting on it (e = 0) is carried up with the board's velocity.
+#[test]
+fn next_pose_reaches_its_pose_in_one_step_and_carries_a_marble() {
+    let mut app = recording_app(DT);
+    let board = app
+        .world_mut()
+        .spawn((
+            Board,
+            Collider::cuboid(Vec3::new(1.0, 0.05, 1.0)).unwrap(),
+            Restitution(0.0),
+            Position(Vec3::new(0.0, -0.05, 0.0)),
+        ))
+        .id();
+    let r = 0.008;
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Restitution(0.0), Position(Vec3::new(0.0, r, 0.0))))
+        .id();
+    for _ in 0..8 {
+        app.update();
+    }
+    let lift = 0.01;
+    let target = Vec3::new(0.0, -0.05 + lift, 0.0);
+    let turn = Quat::from_rotation_y(0.2);
+    app.world_mut().entity_mut(board).insert(NextPose {
+        position: target,
+        rotation: turn,
+    });
+    app.update();
+    let w = app.world();
+    assert_eq!(w.get::<Position>(board).unwrap().0, target);
+    assert!(w.get::<Rotation>(board).unwrap().0.angle_between(turn) <= 1e-6);
+    assert_eq!(w.get::<Velocity>(board).unwrap().0, Vec3::ZERO);
+    assert_eq!(w.get::<AngularVelocity>(board).unwrap().0, Vec3::ZERO);
+    assert!(w.get::<NextPose>(board).is_none());
+    let (p, v) = (
+        w.get::<Position>(marble).unwrap().0,
+        w.get::<Velocity>(marble).unwrap().0,
+    );
+    let board_speed = lift / DT as f32;
+    assert!((p.y - (lift + r)).abs() <= 2e-4, "marble at {p}");
+    assert!(
+        (v.y - board_speed).abs() <= 0.01 * board_speed,
+        "marble moving at {v}"
+    );
+    // Turning about the vertical through the marble moves it nowhere sideways.
+    assert!(p.x.abs() <= 1e-5 && p.z.abs() <= 1e-5);
+    // The board holds still afterwards.
+    app.update();
+    assert_eq!(app.world().get::<Position>(board).unwrap().0, target);
+}
+
+/// With `TransformInterpolation`, a frame's `Transform` lies on the line between the
+/// positions after the last two physics steps, at the overstep fraction: at 144 frames a
+/// second (0 or 1 step a frame) and at 4 steps a frame; a teleport jumps with no streak.
+#[test]
+fn interpolated_transforms_lie_between_the_last_two_poses() {
+    for frame in [1.0 / 144.0, 4.0 * DT] {
+        let mut app = app(frame);
+        #[derive(Resource, Default)]
+        struct Poses(Vec<Vec3>);
+        app.init_resource::<Poses>();
+        let marble = app
+            .world_mut()
+            .spawn((
+                Marble,
+                TransformInterpolation,
+                Transform::from_xyz(0.0, 10.0, 0.0),
+                Velocity(Vec3::new(1.0, 0.0, 0.0)),
+            ))
+            .id();
+        app.add_systems(
+            bevy_app::FixedLast,
+            move |q: Query<&Position>, mut poses: ResMut<Poses>| {
+                poses.0.push(q.get(marble).unwrap().0);
+            },
+        );
+        for _ in 0..40 {
+            app.update();
+            let w = app.world();
+            let poses = &w.resource::<Poses>().0;
+            if poses.len() < 2 {
+                continue;
+            }
+            let (a, b) = (poses[poses.len() - 2], poses[poses.len() - 1]);
+            let f = w.resource::<Time<Fixed>>().overstep_fraction();
+            let shown = w.get::<Transform>(marble).unwrap().translation;
+            let want = a.lerp(b, f);
+            assert!((shown - want).length() <= 1e-5, "{shown} against {want}");
+        }
+        // A teleport: the frames after it show the new place and the path from it, never a
+        // point between the old place and the new (a streak).
+        let to = Vec3::new(-50.0, 20.0, 0.0);
+        let from = app.world().get::<Position>(marble).unwrap().0;
+        app.world_mut()
+            .get_mut::<Transform>(marble)
+            .unwrap()
+            .translation = to;
+        for _ in 0..3 {
+            app.update();
+            let shown = app.world().get::<Transform>(marble).unwrap().translation;
+            let t = app.world().resource::<Time>().elapsed_secs();
+            assert!(
+                (shown - to).length() < 0.1 * (shown - from).length(),
+                "shown at {shown} after a teleport from {from} to {to} ({t} s)"
+            );
+        }
+    }
+}
+
+/// Messages written during the several fixed steps of one frame all reach the `Update`
+/// reader: the same bounces read at one step a frame and at four steps a frame.
+#[test]
+fn messages_of_several_fixed_steps_in_a_frame_all_arrive() {
+    let mut counts = Vec::new();
+    for frame in [DT, 4.0 * DT] {
+        let mut app = recording_app(frame);
+        floor(&mut app, 0.9);
+        for k in 0..8 {
+            app.world_mut().spawn((
+                Marble,
+                Restitution(0.9),
+                Transform::from_xyz(k as f32, 0.05 + 0.02 * k as f32, 0.0),
+            ));
+        }
+        for _ in 0..(128.0 * DT / frame) as usize {
+            app.update();
+        }
+        let seen = app.world().resource::<Seen>();
+        assert_eq!(seen.steps, 128);
+        counts.push((seen.impacts.len(), seen.started.len(), seen.ended.len()));
+    }
+    assert!(counts[0].0 > 16, "{counts:?}");
+    assert_eq!(counts[0], counts[1]);
+}
+
+/// Paused, the physics does not step while the game's own fixed-step systems go on;
+/// at speed 2 a step covers twice the time.
+#[test]
+fn the_physics_pauses_and_scales_apart_from_the_game() {
+    let mut app = recording_app(DT);
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Transform::from_xyz(0.0, 10.0, 0.0)))
+        .id();
+    app.world_mut().resource_mut::<PhysicsClock>().paused = true;
+    for _ in 0..10 {
+        app.update();
+    }
+    assert_eq!(app.world().resource::<Seen>().steps, 10);
+    assert_eq!(app.world().get::<Position>(marble).unwrap().y, 10.0);
+    *app.world_mut().resource_mut::<PhysicsClock>() = PhysicsClock {
+        paused: false,
+        speed: 2.0,
+    };
+    for _ in 0..10 {
+        app.update();
+    }
+    let y = app.world().get::<Position>(marble).unwrap().y;
+    let t = 20.0 * DT as f32;
+    assert!((y - (10.0 - 0.5 * G * t * t)).abs() <= 1e-4, "y = {y}");
+}
+
+/// Diagnostics report the marbles stepped and the step time; the components are
+/// registered for reflection.
+#[test]
+fn diagnostics_and_reflection() {
+    let mut app = app(DT);
+    for k in 0..5 {
+        app.world_mut()
+            .spawn((Marble, Position(Vec3::new(k as f32, 1.0, 0.0))));
+    }
+    app.update();
+    app.update();
+    let store = app.world().resource::<bevy_diagnostic::DiagnosticsStore>();
+    let awake = store.get(&MarbleDiagnostics::AWAKE).unwrap();
+    assert_eq!(awake.value(), Some(5.0));
+    assert!(
+        store
+            .get(&MarbleDiagnostics::STEP_TIME)
+            .unwrap()
+            .value()
+            .is_some()
+    );
+    let registry = app.world().resource::<AppTypeRegistry>().read();
+    assert!(registry.get(std::any::TypeId::of::<Position>()).is_some());
+    assert!(registry.get(std::any::TypeId::of::<StepConfig>()).is_some());
+}
+
+/// The group leaves parts out: without the events plugin no impact is recorded.
+#[test]
+fn the_plugin_group_leaves_parts_out() {
+    use bevy_app::PluginGroup;
+    use bevy_marble::plugin::MarbleEventsPlugin;
+    let mut app = App::new();
+    app.add_plugins((
+        TimePlugin,
+        MarblePhysicsPlugins::default()
+            .build()
+            .disable::<MarbleEventsPlugin>(),
+    ));
+    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        DT,
+    )));
+    app.finish();
+    assert!(!app.world().resource::<StepConfig>().events);
+}
