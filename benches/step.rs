@@ -4,7 +4,8 @@
 //! The `rolling` group steps 10,000 of them with rolling off and on; the
 //! `marble_collisions` group steps the three bench scenes (a), (b), (c) with marble–marble
 //! collisions on; the `labyrinth_steady` group steps (c) from where it is after 5 s; the
-//! `settled_pile` group steps scene (b)'s pile once it has settled, awake and asleep.
+//! `settled_pile` group steps scene (b)'s pile once it has settled, awake and asleep; the
+//! `events` group steps scene (b) at 10,000 marbles with events off and on.
 //!
 //! `cargo bench --bench step`; criterion reports the time per step and, with
 //! `Throughput::Elements(N)`, marble-steps per second (ns per marble-step = 1e9 / that).
@@ -29,7 +30,21 @@ fn bench_scene(
     id: BenchmarkId,
     scene: &Scene,
 ) {
-    let fresh = || Simulation::from_scene(scene).expect("bench scene is valid");
+    bench_with(group, id, scene, |_| {});
+}
+
+/// [`bench_scene`] with `setup` applied to every fresh simulation.
+fn bench_with(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    id: BenchmarkId,
+    scene: &Scene,
+    setup: impl Fn(&mut Simulation),
+) {
+    let fresh = || {
+        let mut sim = Simulation::from_scene(scene).expect("bench scene is valid");
+        setup(&mut sim);
+        sim
+    };
     let mut sim = fresh();
     group.throughput(Throughput::Elements(scene.marbles.len() as u64));
     group.bench_function(id, |b| {
@@ -271,8 +286,29 @@ fn settled_pile(c: &mut Criterion) {
     group.finish();
 }
 
+/// Bench scene (b) with 10,000 marbles, events off and on (impacts, contacts started and
+/// ended recorded as messages every substep: [`StepConfig::events`]).
+fn events(c: &mut Criterion) {
+    let mut group = c.benchmark_group("events");
+    group.sample_size(10);
+    let scene = scenes::pour_box(10_000);
+    for on in [false, true] {
+        let name = if on { "on" } else { "off" };
+        bench_with(
+            &mut group,
+            BenchmarkId::from_parameter(name),
+            &scene,
+            |sim| {
+                sim.world_mut().resource_mut::<StepConfig>().events = on;
+            },
+        );
+    }
+    group.finish();
+}
+
 criterion_group!(
     benches,
+    events,
     walled_board,
     rolling,
     labyrinth_steady,

@@ -1,6 +1,8 @@
 //! Steps a bench scene for profiling: `cargo run --release --example profile_scene --
-//! SCENE N STEPS [collisions|off|rolling|noboards]`, e.g. `walled_board 10000 60 collisions`
-//! (`rolling`: spin and friction on, marble collisions off). SCENE `labyrinth_steady` is
+//! SCENE N STEPS [collisions|off|rolling|noboards|events|sensors]`, e.g. `walled_board 10000
+//! 60 collisions` (`rolling`: spin and friction on, marble collisions off; `events`: the
+//! scene's own settings with impacts and contacts recorded as messages; `sensors`: the
+//! scene's own settings and 48 sensors, 10 cm boxes, spread over the marbles). SCENE `labyrinth_steady` is
 //! the labyrinth from where it is after 5 s (building it steps the labyrinth for 5 s);
 //! SCENE `pile_asleep` is bench scene (b) with sleeping on, stepped for 6 s before the
 //! timed steps (the whole pile is asleep by then; the `settled_pile` bench's `asleep`).
@@ -20,7 +22,9 @@ fn main() {
         let kind = BenchScene::from_name(name).expect("scene");
         (kind.name(), kind.build(n))
     };
-    if let Some(c) = args.get(4) {
+    let events = args.get(4).is_some_and(|c| c == "events");
+    let sensors = args.get(4).is_some_and(|c| c == "sensors");
+    if let Some(c) = args.get(4).filter(|_| !events && !sensors) {
         scene.marble_collisions = c == "collisions";
         scene.rolling |= c == "rolling";
         if c == "noboards" {
@@ -28,6 +32,28 @@ fn main() {
         }
     }
     let mut sim = Simulation::from_scene(&scene).expect("valid scene");
+    sim.world_mut().resource_mut::<StepConfig>().events = events;
+    if sensors {
+        let (mut lo, mut hi) = (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY);
+        for m in &scene.marbles {
+            let p = glam::Vec3::from_array(m.position);
+            (lo, hi) = (lo.min(p), hi.max(p));
+        }
+        for i in 0..8 {
+            for k in 0..6 {
+                let at = glam::Vec3::new(
+                    lo.x + (hi.x - lo.x) * (i as f32 + 0.5) / 8.0,
+                    0.5 * (lo.y + hi.y),
+                    lo.z + (hi.z - lo.z) * (k as f32 + 0.5) / 6.0,
+                );
+                sim.world_mut().spawn((
+                    Sensor,
+                    Collider::cuboid(glam::Vec3::splat(0.05)).expect("a valid box"),
+                    Position(at),
+                ));
+            }
+        }
+    }
     if name == "pile_asleep" {
         for _ in 0..bevy_marble::scenes::SETTLE_STEPS {
             sim.step();
