@@ -211,7 +211,9 @@ fn resolve_unset_pose(
     #[cfg(feature = "bevy")]
     let (translation, rotation) = world
         .get::<bevy_transform::components::Transform>(entity)
-        .map_or((Vec3::ZERO, Quat::IDENTITY), |t| (t.translation, t.rotation));
+        .map_or((Vec3::ZERO, Quat::IDENTITY), |t| {
+            (t.translation, t.rotation)
+        });
     #[cfg(not(feature = "bevy"))]
     let (translation, rotation) = (Vec3::ZERO, Quat::IDENTITY);
     if let Some(mut position) = world.get_mut::<Position>(entity)

@@ -126,29 +126,6 @@ impl Observed {
     pub(crate) const EXITED: u8 = 16;
 }
 
-/// Notes which of the engine's events have observers (first substep of each step).
-pub fn find_observers(world: &mut World) {
-    fn observed<E: Event>(world: &World, bit: u8) -> u8 {
-        let Some(key) = world.event_key::<E>() else {
-            return 0;
-        };
-        let any = world.observers().try_get_observers(key).is_some_and(|o| {
-            !o.global_observers().is_empty()
-                || !o.entity_observers().is_empty()
-                || !o.component_observers().is_empty()
-        });
-        if any { bit } else { 0 }
-    }
-    let bits = observed::<MarbleImpact>(world, Observed::IMPACT)
-        | observed::<ContactStarted>(world, Observed::STARTED)
-        | observed::<ContactEnded>(world, Observed::ENDED)
-        | observed::<SensorEntered>(world, Observed::ENTERED)
-        | observed::<SensorExited>(world, Observed::EXITED);
-    if let Some(mut state) = world.get_resource_mut::<EventState>() {
-        state.observed = bits;
-    }
-}
-
 /// Where a marble's centre was at the last sensor check (added to marbles while there are
 /// sensors): a marble that crosses a thin sensor within one step enters and leaves it.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]

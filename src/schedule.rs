@@ -14,14 +14,18 @@ use crate::systems::{
 pub struct MarbleSubstep;
 
 /// The stages of a substep, in order: the one place where the order is fixed. Stages
-/// named `Board…` are marble–board work, `Pair…` marble–marble work. Add your own systems
-/// to the physics with `.in_set(MarbleSystems::…)` or order them `.before`/`.after` a
-/// stage.
+/// named `Board…` are marble–board work, `Pair…` marble–marble work; each stage's systems
+/// are in one file under `systems/` (the table in [`crate::systems`]). Add your own
+/// systems to the physics with `.in_set(MarbleSystems::…)` or order them
+/// `.before`/`.after` a stage.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum MarbleSystems {
-    /// Snapshot every board's pose and motion for the substep; on the first substep, wake
-    /// the sleeping marbles something reaches ([`crate::sleep`]).
+    /// Boards with a [`NextPose`](crate::components::NextPose) get their velocities (first
+    /// substep); every board's pose and motion is snapshot for the substep.
     PrepareBoards,
+    /// First substep, with sleeping on or marbles asleep: wake the sleeping marbles
+    /// something reaches ([`crate::sleep`]).
+    Wake,
     /// Gravity plus user forces → acceleration.
     AccumulateForces,
     /// Marble–marble pairs touching at the substep's start: collisions, friction, contact
@@ -33,7 +37,7 @@ pub enum MarbleSystems {
     /// closed forms of a marble alone on one piece.
     BoardDetection,
     /// Marble–board response: equation (1), contacts, continuous collision, position
-    /// correction.
+    /// correction; spinning marbles' orientations turned.
     BoardResponse,
     /// Marble–marble pairs that meet inside the substep collide at their time of impact
     /// (only with `marble_collisions` on).
@@ -41,16 +45,27 @@ pub enum MarbleSystems {
     /// The substep's impacts become [`MarbleImpact`](crate::events::MarbleImpact)
     /// messages, and its touching pairs are noted (only with `events` on).
     Events,
-    /// Kinematic boards advance.
+    /// Kinematic boards advance; on the last substep, driven boards are placed at their
+    /// [`NextPose`](crate::components::NextPose).
     MoveBoards,
-    /// Last substep only: with sleeping on, put to sleep the groups that have been slow
-    /// long enough ([`crate::sleep`]); clear forces, quarantine non-finite marbles; place
-    /// driven boards at their [`NextPose`](crate::components::NextPose); report contacts
-    /// that started or ended and sensors entered or left ([`crate::events`]). A step
-    /// of a still world (every marble asleep, nothing moving: see [`run_step`]) runs only
-    /// its first substep, so this stage does not run in it (it would find no awake marble).
+    /// Last substep, with sleeping on: put to sleep the groups that have been slow long
+    /// enough ([`crate::sleep`]).
+    FallAsleep,
+    /// Last substep: clear forces, quarantine non-finite marbles.
     Finish,
+    /// Last substep: contacts that started or ended, sensors entered or left
+    /// ([`crate::events`]).
+    Report,
 }
+
+/// The stages that run only in a step's last substep: a step of a still world (every
+/// marble asleep, nothing moving: see [`run_step`]) runs only its first substep, so they
+/// do not run in it (they would find no awake marble).
+pub const LAST_SUBSTEP_STAGES: [MarbleSystems; 3] = [
+    MarbleSystems::FallAsleep,
+    MarbleSystems::Finish,
+    MarbleSystems::Report,
+];
 
 /// Builds the substep schedule: every stage chained in order, single-threaded, and
 /// ambiguity detection set to error so that any unordered conflicting pair of systems
@@ -68,6 +83,7 @@ pub fn substep_schedule() -> Schedule {
     schedule.configure_sets(
         (
             MarbleSystems::PrepareBoards,
+            MarbleSystems::Wake,
             MarbleSystems::AccumulateForces,
             MarbleSystems::PairContacts,
             MarbleSystems::Integrate,
@@ -76,25 +92,31 @@ pub fn substep_schedule() -> Schedule {
             MarbleSystems::PairImpacts,
             MarbleSystems::Events,
             MarbleSystems::MoveBoards,
+            MarbleSystems::FallAsleep,
             MarbleSystems::Finish,
+            MarbleSystems::Report,
         )
             .chain(),
     );
+    for stage in LAST_SUBSTEP_STAGES {
+        schedule.configure_sets(stage.run_if(forces::last_substep));
+    }
+    let rolling = |c: Res<StepConfig>| c.rolling;
+    let collisions = |c: Res<StepConfig>| c.marble_collisions;
     schedule.add_systems((
         (
             boards::drive_boards.run_if(sleep::first_substep),
-            crate::events::find_observers
-                .run_if(sleep::first_substep)
-                .run_if(events::watching),
             boards::prepare_boards,
-            sleep::wake.run_if(sleep::first_substep),
         )
             .chain()
             .in_set(MarbleSystems::PrepareBoards),
-        events::record_touches
-            .run_if(events::events_on)
-            .in_set(MarbleSystems::Events),
+        sleep::wake
+            .run_if(sleep::first_substep)
+            .in_set(MarbleSystems::Wake),
         forces::accumulate_forces.in_set(MarbleSystems::AccumulateForces),
+        pairs::pair_contacts
+            .run_if(collisions)
+            .in_set(MarbleSystems::PairContacts),
         integrate::integrate.in_set(MarbleSystems::Integrate),
         (
             board_detection::detect_board_contacts,
@@ -104,33 +126,40 @@ pub fn substep_schedule() -> Schedule {
         (
             board_response::respond_to_boards,
             board_response::respond_to_boards_spinning,
-            boards::rotate_marbles.run_if(|c: Res<StepConfig>| c.rolling),
+            board_response::rotate_marbles.run_if(rolling),
         )
             .chain()
             .in_set(MarbleSystems::BoardResponse),
-        pairs::pair_contacts
-            .run_if(|c: Res<StepConfig>| c.marble_collisions)
-            .in_set(MarbleSystems::PairContacts),
         pairs::pair_impacts
-            .run_if(|c: Res<StepConfig>| c.marble_collisions)
+            .run_if(collisions)
             .in_set(MarbleSystems::PairImpacts),
+        (
+            events::find_observers
+                .run_if(sleep::first_substep)
+                .run_if(events::watching),
+            events::record_touches.run_if(events::events_on),
+        )
+            .chain()
+            .in_set(MarbleSystems::Events),
         (
             boards::move_boards,
             boards::advance_tilt.run_if(resource_exists::<crate::config::GravityTilt>),
+            boards::finish_driven_boards.run_if(forces::last_substep),
         )
             .chain()
             .in_set(MarbleSystems::MoveBoards),
+        sleep::fall_asleep
+            .run_if(sleep::sleep_on)
+            .in_set(MarbleSystems::FallAsleep),
+        (forces::clear_forces, forces::quarantine_non_finite)
+            .chain()
+            .in_set(MarbleSystems::Finish),
         (
-            sleep::fall_asleep.run_if(sleep::sleep_on),
-            forces::clear_forces,
-            forces::quarantine_non_finite,
-            boards::finish_driven_boards,
             events::finish_touches.run_if(events::events_on),
             events::update_sensors.run_if(events::any_sensor),
         )
             .chain()
-            .in_set(MarbleSystems::Finish)
-            .run_if(forces::last_substep),
+            .in_set(MarbleSystems::Report),
     ));
     schedule
 }
@@ -159,7 +188,7 @@ pub fn init_resources(world: &mut World) {
 /// the first when its [`crate::systems::sleep::wake`] found a still world (every marble asleep,
 /// none woken, no board moving, gravity not turning: [`SleepState::is_idle`]), whose
 /// other substeps would do nothing. Systems added to [`MarbleSubstep`] then run once in
-/// that step, and those of the last substep ([`MarbleSystems::Finish`], or run if
+/// that step, and those of the last substep ([`LAST_SUBSTEP_STAGES`], or run if
 /// [`Substep::is_last`]) not at all. It sets the [`Substep`] resource before each
 /// substep.
 ///

@@ -1,4 +1,5 @@
-//! Marble–board response: the event loop for the marbles detection flagged.
+//! Marble–board response: the event loop for the marbles detection flagged, then the
+//! spinning marbles' orientations turned by their spin.
 
 use bevy_ecs::prelude::*;
 
@@ -8,11 +9,11 @@ use super::{
 use crate::board_contact::{
     BoardCache, BoardSnapshot, NearPieces, TouchList, gather, touch_tolerance,
 };
-#[cfg(doc)]
-use crate::components::AngularVelocity;
+use crate::components::{AngularVelocity, Board, Rotation};
 use crate::components::{Contacts, Pending, compensated_add};
 use crate::config::{StepConfig, Substep};
 use crate::response::{Found, MarbleIn, MarbleOut, SubstepParams, resolve};
+use glam::{Quat, Vec3};
 
 /// Resolves every flagged marble that does not spin through the substep's event loop
 /// ([`crate::response`]): equation (1) for collisions, removal of approaching velocity for
@@ -120,4 +121,21 @@ fn respond_one(
         Pending::Overlap | Pending::None => Found::Overlap,
     };
     resolve(boards, Some(near), params, marble, found, touches, contacts)
+}
+
+/// Turns every spinning marble's [`Rotation`] by its angular velocity over the substep
+/// (runs only when rolling is modelled).
+pub fn rotate_marbles(
+    substep: Res<Substep>,
+    mut marbles: Query<
+        (&mut Rotation, &AngularVelocity),
+        (With<crate::components::Marble>, Without<Board>),
+    >,
+) {
+    let h = substep.h;
+    for (mut rotation, angular) in &mut marbles {
+        if angular.0 != Vec3::ZERO {
+            rotation.0 = (Quat::from_scaled_axis(angular.0 * h) * rotation.0).normalize();
+        }
+    }
 }

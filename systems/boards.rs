@@ -102,23 +102,6 @@ pub fn move_boards(
     }
 }
 
-/// Turns every spinning marble's [`Rotation`] by its angular velocity over the substep
-/// (runs only when rolling is modelled).
-pub fn rotate_marbles(
-    substep: Res<Substep>,
-    mut marbles: Query<
-        (&mut Rotation, &AngularVelocity),
-        (With<crate::components::Marble>, Without<Board>),
-    >,
-) {
-    let h = substep.h;
-    for (mut rotation, angular) in &mut marbles {
-        if angular.0 != Vec3::ZERO {
-            rotation.0 = (Quat::from_scaled_axis(angular.0 * h) * rotation.0).normalize();
-        }
-    }
-}
-
 /// Advances the [`GravityTilt`](crate::config::GravityTilt) of a scene that models its
 /// turning board by turning gravity (runs only when there is one).
 pub fn advance_tilt(substep: Res<Substep>, mut tilt: ResMut<crate::config::GravityTilt>) {

@@ -1,6 +1,6 @@
 //! The event systems ([`crate::events`]): impacts and touches recorded every substep (stage
 //! `Events`), contacts that started or ended and sensors entered or left at the step's end
-//! (stage `Finish`).
+//! (stage `Report`).
 
 use bevy_ecs::prelude::*;
 use glam::Vec3;
@@ -17,6 +17,30 @@ use crate::events::{
 };
 use crate::pairs::MarbleContacts;
 use crate::sleep::Sleeping;
+
+/// First substep of each step (stage `Events`): notes which of the engine's events have
+/// observers, so that only those are triggered.
+pub fn find_observers(world: &mut World) {
+    fn observed<E: Event>(world: &World, bit: u8) -> u8 {
+        let Some(key) = world.event_key::<E>() else {
+            return 0;
+        };
+        let any = world.observers().try_get_observers(key).is_some_and(|o| {
+            !o.global_observers().is_empty()
+                || !o.entity_observers().is_empty()
+                || !o.component_observers().is_empty()
+        });
+        if any { bit } else { 0 }
+    }
+    let bits = observed::<MarbleImpact>(world, Observed::IMPACT)
+        | observed::<ContactStarted>(world, Observed::STARTED)
+        | observed::<ContactEnded>(world, Observed::ENDED)
+        | observed::<SensorEntered>(world, Observed::ENTERED)
+        | observed::<SensorExited>(world, Observed::EXITED);
+    if let Some(mut state) = world.get_resource_mut::<EventState>() {
+        state.observed = bits;
+    }
+}
 
 /// Run condition: impacts and contacts are recorded ([`StepConfig::events`]).
 pub fn events_on(config: Res<StepConfig>) -> bool {

@@ -6,16 +6,19 @@
 //!
 //! | stage | file | does |
 //! | --- | --- | --- |
-//! | `PrepareBoards` | `boards.rs`, `sleep.rs` | on the first substep, gives boards with a `NextPose` their velocities; snapshots every board's pose and motion for the substep; on the first substep, with sleeping on, wakes the sleeping marbles something reaches |
+//! | `PrepareBoards` | `boards.rs` | on the first substep, gives boards with a `NextPose` their velocities; snapshots every board's pose and motion for the substep |
+//! | `Wake` | `sleep.rs` | on the first substep: wakes the sleeping marbles something reaches |
 //! | `AccumulateForces` | `forces.rs` | acceleration = gravity + force / mass |
 //! | `PairContacts` | `pairs.rs` | marble–marble pairs touching at the start: collisions, friction, contact forces, overlap (only with `marble_collisions`) |
 //! | `Integrate` | `integrate.rs` | free motion over the substep with the chosen integrator |
 //! | `BoardDetection` | `board_detection.rs` | marble–board touches at the start (collision or contact), else the first impact (CCD) or the end overlap; marbles resting, sliding or rolling on one piece with nothing else near are resolved here (in closed form on a still board, unless a spinning marble's friction event falls inside the substep; by the event loop on that touch otherwise) |
-//! | `BoardResponse` | `board_response.rs` | the marble–board event loop for the marbles detection flagged: equation (1), contacts, continuous collision |
+//! | `BoardResponse` | `board_response.rs` | the marble–board event loop for the marbles detection flagged: equation (1), contacts, continuous collision; spinning marbles' orientations turned |
 //! | `PairImpacts` | `pairs.rs` | marble–marble pairs that meet inside the substep collide at their time of impact (only with `marble_collisions`) |
 //! | `Events` | `events.rs` | the substep's impacts become messages, its touching pairs are noted (only with `events`) |
-//! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities |
-//! | `Finish` | `forces.rs`, `sleep.rs`, `boards.rs`, `events.rs` | on the last substep: clear forces, quarantine non-finite marbles; with sleeping on, put to sleep the groups that have been slow long enough; place driven boards at their `NextPose`; report contacts started and ended, sensors entered and left |
+//! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities; on the last substep, driven boards reach their `NextPose` |
+//! | `FallAsleep` | `sleep.rs` | on the last substep, with sleeping on: put to sleep the groups that have been slow long enough |
+//! | `Finish` | `forces.rs` | on the last substep: clear forces, quarantine non-finite marbles |
+//! | `Report` | `events.rs` | on the last substep: contacts started and ended, sensors entered and left |
 
 use bevy_ecs::prelude::*;
 use bevy_ecs::query::QueryData;

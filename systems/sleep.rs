@@ -1,5 +1,5 @@
 //! Sleeping's two systems ([`crate::sleep`]): waking, in the first substep's
-//! `PrepareBoards` stage, and falling asleep, in the last substep's `Finish` stage.
+//! `Wake` stage, and falling asleep, in the last substep's `FallAsleep` stage.
 
 use bevy_ecs::prelude::*;
 use glam::Vec3;
