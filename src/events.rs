@@ -280,6 +280,7 @@ pub fn update_messages(world: &mut World) {
     update::<ContactEnded>(world);
     update::<SensorEntered>(world);
     update::<SensorExited>(world);
+    update::<crate::validate::QuarantineReport>(world);
 }
 
 /// A dense grid over the sensors' bounds, for point and short-segment queries: each cell

@@ -18,6 +18,7 @@ pub mod schedule;
 pub mod simulation;
 pub mod sleep;
 pub mod study;
+pub mod validate;
 
 // The ECS systems live in the top-level `systems/` folder, one file per stage, so that the
 // pipeline is visible at a glance from the repository root; `#[path]` includes that folder
@@ -56,4 +57,5 @@ pub mod prelude {
     pub use crate::schedule::{MarbleSubstep, MarbleSystems};
     pub use crate::simulation::Simulation;
     pub use crate::sleep::{Drowsy, Sleeping};
+    pub use crate::validate::{InvalidValue, QuarantineReport};
 }

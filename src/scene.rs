@@ -14,6 +14,7 @@ use thiserror::Error;
 
 use crate::config::{Integrator, Preset, Sleep, StepConfig};
 use crate::geometry::{BoardGeometry, PartShape};
+use crate::validate::{MAX_COORDINATE, MAX_SPEED};
 
 /// Why a scene could not be loaded or used. Each is the user's input at fault.
 #[derive(Debug, Error)]
@@ -395,9 +396,9 @@ impl Scene {
         for (i, b) in self.boards.iter().enumerate() {
             let f = |name: &str| format!("boards[{i}].{name}");
             validate_shape(&f("shape"), &b.shape, true)?;
-            finite3(&f("position"), b.position)?;
+            in_range(&f("position"), b.position, MAX_COORDINATE, POSITION_RANGE)?;
             rotation(&f("rotation"), b.rotation)?;
-            finite3(&f("velocity"), b.velocity)?;
+            in_range(&f("velocity"), b.velocity, MAX_SPEED, SPEED_RANGE)?;
             finite3(&f("angular_velocity"), b.angular_velocity)?;
             unit_interval(&f("restitution"), b.restitution)?;
             non_negative(&f("friction"), b.friction)?;
@@ -426,8 +427,8 @@ impl Scene {
         for (i, m) in self.marbles.iter().enumerate() {
             // A million marbles are checked without formatting a field name.
             let f = |name: &'static str| Lazy(move || format!("marbles[{i}].{name}"));
-            finite3(f("position"), m.position)?;
-            finite3(f("velocity"), m.velocity)?;
+            in_range(f("position"), m.position, MAX_COORDINATE, POSITION_RANGE)?;
+            in_range(f("velocity"), m.velocity, MAX_SPEED, SPEED_RANGE)?;
             finite3(f("angular_velocity"), m.angular_velocity)?;
             positive(f("radius"), m.radius)?;
             if let Some(mass) = m.mass {
@@ -708,6 +709,22 @@ fn finite(field: impl FieldName, x: f32) -> Result<(), SceneError> {
         Ok(())
     } else {
         invalid(field, "finite", x)
+    }
+}
+
+/// What [`in_range`] asks of a position and of a velocity (the supported range of
+/// [`crate::validate`]).
+const POSITION_RANGE: &str = "within 1e6 m of the origin in each coordinate";
+const SPEED_RANGE: &str = "within 1e5 m/s in each coordinate";
+
+/// Finite, with every coordinate within `max`.
+fn in_range(field: impl FieldName, v: [f32; 3], max: f32, rule: &str) -> Result<(), SceneError> {
+    if !v.iter().all(|x| x.is_finite()) {
+        invalid(field, "finite", format!("{v:?}"))
+    } else if v.iter().all(|x| x.abs() <= max) {
+        Ok(())
+    } else {
+        invalid(field, rule, format!("{v:?}"))
     }
 }
 

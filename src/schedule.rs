@@ -5,7 +5,7 @@ use bevy_ecs::schedule::{LogLevel, ScheduleBuildSettings, ScheduleLabel};
 
 use crate::config::{StepConfig, Substep};
 use crate::systems::{
-    board_detection, board_response, boards, events, forces, integrate, pairs, sleep,
+    board_detection, board_response, boards, events, forces, integrate, pairs, sleep, validate,
 };
 
 /// The schedule that runs one substep. A step runs it `substeps` times
@@ -20,6 +20,9 @@ pub struct MarbleSubstep;
 /// `.before`/`.after` a stage.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum MarbleSystems {
+    /// First substep: marbles and boards with a bad value are quarantined before anything
+    /// moves ([`crate::validate`]).
+    Validate,
     /// Boards with a [`NextPose`](crate::components::NextPose) get their velocities (first
     /// substep); every board's pose and motion is snapshot for the substep.
     PrepareBoards,
@@ -51,7 +54,8 @@ pub enum MarbleSystems {
     /// Last substep, with sleeping on: put to sleep the groups that have been slow long
     /// enough ([`crate::sleep`]).
     FallAsleep,
-    /// Last substep: clear forces, quarantine non-finite marbles.
+    /// Last substep: clear forces. (A marble a step sent out of the supported range is
+    /// quarantined by the next step's `Validate`, before anything moves.)
     Finish,
     /// Last substep: contacts that started or ended, sensors entered or left
     /// ([`crate::events`]).
@@ -82,6 +86,7 @@ pub fn substep_schedule() -> Schedule {
     });
     schedule.configure_sets(
         (
+            MarbleSystems::Validate,
             MarbleSystems::PrepareBoards,
             MarbleSystems::Wake,
             MarbleSystems::AccumulateForces,
@@ -104,6 +109,9 @@ pub fn substep_schedule() -> Schedule {
     let rolling = |c: Res<StepConfig>| c.rolling;
     let collisions = |c: Res<StepConfig>| c.marble_collisions;
     schedule.add_systems((
+        validate::validate
+            .run_if(sleep::first_substep)
+            .in_set(MarbleSystems::Validate),
         (
             boards::drive_boards.run_if(sleep::first_substep),
             boards::prepare_boards,
@@ -151,9 +159,7 @@ pub fn substep_schedule() -> Schedule {
         sleep::fall_asleep
             .run_if(sleep::sleep_on)
             .in_set(MarbleSystems::FallAsleep),
-        (forces::clear_forces, forces::quarantine_non_finite)
-            .chain()
-            .in_set(MarbleSystems::Finish),
+        forces::clear_forces.in_set(MarbleSystems::Finish),
         (
             events::finish_touches.run_if(events::events_on),
             events::update_sensors.run_if(events::any_sensor),
@@ -182,6 +188,7 @@ pub fn init_resources(world: &mut World) {
     world.init_resource::<Messages<crate::events::ContactEnded>>();
     world.init_resource::<Messages<crate::events::SensorEntered>>();
     world.init_resource::<Messages<crate::events::SensorExited>>();
+    world.init_resource::<Messages<crate::validate::QuarantineReport>>();
 }
 
 /// Runs one step: `substeps` runs of the substep schedule through `run_substep`; only

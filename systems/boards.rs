@@ -6,8 +6,8 @@ use parry3d::bounding_volume::Aabb;
 
 use crate::board_contact::{BoardCache, BoardSnapshot};
 use crate::components::{
-    AngularVelocity, Board, Collider, Friction, NextPose, Position, Restitution, RollingResistance,
-    Rotation, SpinDamping, Velocity,
+    AngularVelocity, Board, Collider, Friction, NextPose, Position, Quarantined, Restitution,
+    RollingResistance, Rotation, SpinDamping, Velocity,
 };
 use crate::config::{StepConfig, Substep};
 use crate::geometry::transform_aabb;
@@ -30,7 +30,7 @@ pub fn prepare_boards(
             Option<&RollingResistance>,
             Option<&SpinDamping>,
         ),
-        With<Board>,
+        (With<Board>, Without<Quarantined>),
     >,
 ) {
     let h = substep.h;
@@ -89,7 +89,10 @@ pub fn prepare_boards(
 /// Advances every board by its linear and angular velocity over the substep.
 pub fn move_boards(
     substep: Res<Substep>,
-    mut boards: Query<(&mut Position, &mut Rotation, &Velocity, &AngularVelocity), With<Board>>,
+    mut boards: Query<
+        (&mut Position, &mut Rotation, &Velocity, &AngularVelocity),
+        (With<Board>, Without<Quarantined>),
+    >,
 ) {
     let h = substep.h;
     for (mut position, mut rotation, velocity, angular) in &mut boards {
@@ -123,7 +126,7 @@ pub fn drive_boards(
             &mut Velocity,
             &mut AngularVelocity,
         ),
-        With<Board>,
+        (With<Board>, Without<Quarantined>),
     >,
 ) {
     let dt = config.dt;
@@ -151,7 +154,7 @@ pub fn finish_driven_boards(
             &mut Velocity,
             &mut AngularVelocity,
         ),
-        With<Board>,
+        (With<Board>, Without<Quarantined>),
     >,
 ) {
     for (entity, next, mut position, mut rotation, mut velocity, mut angular) in &mut boards {

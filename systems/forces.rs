@@ -2,7 +2,7 @@
 
 use bevy_ecs::prelude::*;
 
-use crate::components::{Acceleration, Force, Marble, Mass, Position, Quarantined, Velocity};
+use crate::components::{Acceleration, Force, Marble, Mass, Quarantined};
 use crate::config::{GravityTilt, StepConfig, Substep};
 use crate::sleep::Sleeping;
 
@@ -32,23 +32,6 @@ pub fn clear_forces(mut forces: Query<&mut Force, (With<Marble>, Without<Sleepin
     for mut force in &mut forces {
         if force.0 != glam::Vec3::ZERO {
             force.0 = glam::Vec3::ZERO;
-        }
-    }
-}
-
-/// Marks marbles whose state stopped being finite (a NaN force, an overflow) with
-/// [`Quarantined`]: they are left out of every later step instead of spreading NaN, and
-/// [`crate::Simulation::quarantined`] reports them.
-pub fn quarantine_non_finite(
-    mut commands: Commands,
-    marbles: Query<
-        (Entity, &Position, &Velocity),
-        (With<Marble>, Without<Quarantined>, Without<Sleeping>),
-    >,
-) {
-    for (entity, position, velocity) in &marbles {
-        if !(position.is_finite() && velocity.is_finite()) {
-            commands.entity(entity).insert(Quarantined);
         }
     }
 }

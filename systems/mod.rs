@@ -6,6 +6,7 @@
 //!
 //! | stage | file | does |
 //! | --- | --- | --- |
+//! | `Validate` | `validate.rs` | on the first substep: marbles and boards with a bad value (from the program, or sent out of range by the last step) are quarantined before anything moves |
 //! | `PrepareBoards` | `boards.rs` | on the first substep, gives boards with a `NextPose` their velocities; snapshots every board's pose and motion for the substep |
 //! | `Wake` | `sleep.rs` | on the first substep: wakes the sleeping marbles something reaches |
 //! | `AccumulateForces` | `forces.rs` | acceleration = gravity + force / mass |
@@ -17,7 +18,7 @@
 //! | `Events` | `events.rs` | the substep's impacts become messages, its touching pairs are noted (only with `events`) |
 //! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities; on the last substep, driven boards reach their `NextPose` |
 //! | `FallAsleep` | `sleep.rs` | on the last substep, with sleeping on: put to sleep the groups that have been slow long enough |
-//! | `Finish` | `forces.rs` | on the last substep: clear forces, quarantine non-finite marbles |
+//! | `Finish` | `forces.rs` | on the last substep: clear forces |
 //! | `Report` | `events.rs` | on the last substep: contacts started and ended, sensors entered and left |
 
 use bevy_ecs::prelude::*;
@@ -127,3 +128,4 @@ pub mod forces;
 pub mod integrate;
 pub mod pairs;
 pub mod sleep;
+pub mod validate;

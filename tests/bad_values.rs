@@ -1,0 +1,293 @@
+//! Bad values through every door (the contract's rule): a marble or board given a bad
+//! value by the Rust API, later by a system, or in a Bevy app is quarantined, stays put,
+//! is reported (entity, component, value), and the rest of the world steps exactly as if
+//! it were not there; the newtypes' constructors refuse the same values; scene files refuse
+//! positions and speeds outside the supported range.
+
+use bevy_ecs::message::Messages;
+use bevy_marble::components::{RollingResistance, SpinDamping};
+use bevy_marble::prelude::*;
+use bevy_marble::scenes;
+use bevy_marble::validate::{MAX_COORDINATE, MAX_SPEED};
+use glam::Vec3;
+
+/// A drop onto a floor and a second marble beside it, stepped once.
+fn world() -> Simulation {
+    let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
+    scene.marbles[0].position = [0.0, 0.5, 0.0];
+    Simulation::from_scene(&scene).unwrap()
+}
+
+/// Steps `sim` `n` times and returns every report written meanwhile (a `Simulation`
+/// keeps a step's messages until the end of the next step: read them after each).
+fn step(sim: &mut Simulation, n: usize) -> Vec<QuarantineReport> {
+    let mut out = Vec::new();
+    for _ in 0..n {
+        sim.step();
+        let messages = sim.world().resource::<Messages<QuarantineReport>>();
+        out.extend(messages.iter_current_update_messages().cloned());
+    }
+    out
+}
+
+/// Each bad value, inserted by the Rust API on a second marble: quarantined before it
+/// moves, reported with its component, and the good marble's state is bit for bit what it
+/// is without the bad one.
+#[test]
+fn every_bad_marble_value_is_quarantined_where_it_is() {
+    let mut alone = world();
+    for _ in 0..30 {
+        alone.step();
+    }
+    let want = alone.marble_state(0);
+    let at = Vec3::new(1.0, 0.3, 0.0);
+    let cases: Vec<(&str, Box<dyn Fn(&mut bevy_ecs::world::EntityWorldMut)>)> = vec![
+        (
+            "Radius",
+            Box::new(|e| {
+                e.insert(Radius(0.0));
+            }),
+        ),
+        (
+            "Radius",
+            Box::new(|e| {
+                e.insert(Radius(-1.0));
+            }),
+        ),
+        (
+            "Restitution",
+            Box::new(|e| {
+                e.insert(Restitution(2.0));
+            }),
+        ),
+        (
+            "Restitution",
+            Box::new(|e| {
+                e.insert(Restitution(-0.1));
+            }),
+        ),
+        (
+            "Friction",
+            Box::new(|e| {
+                e.insert(Friction(-0.5));
+            }),
+        ),
+        (
+            "Velocity",
+            Box::new(|e| {
+                e.insert(Velocity(Vec3::new(f32::INFINITY, 0.0, 0.0)));
+            }),
+        ),
+        (
+            "Velocity",
+            Box::new(|e| {
+                e.insert(Velocity(Vec3::new(0.0, 2.0 * MAX_SPEED, 0.0)));
+            }),
+        ),
+        (
+            "Force",
+            Box::new(|e| {
+                e.insert(Force(Vec3::new(0.0, f32::NAN, 0.0)));
+            }),
+        ),
+        (
+            "AngularVelocity",
+            Box::new(|e| {
+                e.insert(AngularVelocity(Vec3::splat(f32::NAN)));
+            }),
+        ),
+    ];
+    for (component, spoil) in cases {
+        let mut sim = world();
+        let bad = sim.world_mut().spawn((Marble, Position(at))).id();
+        spoil(&mut sim.world_mut().entity_mut(bad));
+        let r = step(&mut sim, 30);
+        let w = sim.world();
+        assert!(
+            w.get::<Quarantined>(bad).is_some(),
+            "{component}: not quarantined"
+        );
+        assert_eq!(
+            w.get::<Position>(bad).unwrap().0,
+            at,
+            "{component}: it moved"
+        );
+        assert_eq!(r.len(), 1, "{component}: {r:?}");
+        assert_eq!((r[0].entity, r[0].reason.component), (bad, component));
+        assert_eq!(
+            sim.marble_state(0),
+            want,
+            "{component}: the good marble changed"
+        );
+    }
+    // A non-finite position and one beyond the supported range stay where they are too.
+    for p in [Vec3::new(f32::NAN, 0.0, 0.0), Vec3::new(-1e38, 0.5, 0.0)] {
+        let mut sim = world();
+        let bad = sim.world_mut().spawn((Marble, Position(p))).id();
+        let r = step(&mut sim, 1);
+        let w = sim.world();
+        assert!(w.get::<Quarantined>(bad).is_some());
+        assert_eq!(
+            w.get::<Position>(bad)
+                .unwrap()
+                .0
+                .to_array()
+                .map(f32::to_bits),
+            p.to_array().map(f32::to_bits)
+        );
+        assert_eq!(r[0].reason.component, "Position");
+    }
+}
+
+/// A value spoiled later (a program setting a radius of −0.01 m after ten steps) is caught
+/// at the next step: the marble stops where it was, and the message says what and why.
+#[test]
+fn a_value_changed_later_is_caught_at_the_next_step() {
+    let mut sim = world();
+    assert!(step(&mut sim, 10).is_empty());
+    let marble = sim.marbles()[0];
+    let before = sim.world().get::<Position>(marble).unwrap().0;
+    sim.world_mut().get_mut::<Radius>(marble).unwrap().0 = -0.01;
+    let r = step(&mut sim, 5);
+    let w = sim.world();
+    assert!(w.get::<Quarantined>(marble).is_some());
+    assert_eq!(w.get::<Position>(marble).unwrap().0, before);
+    assert_eq!(r.len(), 1);
+    assert_eq!(
+        r[0].reason.to_string(),
+        "Radius must be finite and > 0, got -0.01"
+    );
+    assert_eq!(sim.quarantined(), vec![0]);
+}
+
+/// A board given a non-finite pose is quarantined and out of the step: the marble above
+/// it falls freely through where it was, as if it were not there.
+#[test]
+fn a_bad_board_is_quarantined_and_out_of_the_step() {
+    let mut sim = world();
+    let board = sim
+        .world()
+        .resource::<bevy_marble::board_contact::BoardCache>();
+    let _ = board;
+    let floor = {
+        let mut q = sim
+            .world_mut()
+            .query_filtered::<bevy_ecs::entity::Entity, bevy_ecs::query::With<Board>>();
+        q.iter(sim.world()).next().unwrap()
+    };
+    sim.world_mut().get_mut::<Velocity>(floor).unwrap().0 = Vec3::new(f32::NAN, 0.0, 0.0);
+    let dt = sim.world().resource::<StepConfig>().dt;
+    let steps = 120;
+    let r = step(&mut sim, steps);
+    assert!(sim.world().get::<Quarantined>(floor).is_some());
+    assert_eq!(r[0].reason.component, "Velocity");
+    // Semi-implicit Euler's free fall: y = y0 − g dt² n(n+1)/2.
+    let n = steps as f32;
+    let want = 0.5 - 9.81 * dt * dt * n * (n + 1.0) / 2.0;
+    let (x, _) = sim.marble_state(0);
+    assert!((x.y - want).abs() <= 1e-4, "y = {}, want {want}", x.y);
+}
+
+/// The newtypes' constructors refuse what the step would quarantine, at the edges.
+#[test]
+fn constructors_refuse_bad_values_at_their_edges() {
+    assert!(Radius::new(0.008).is_ok());
+    assert!(Radius::new(0.0).is_err() && Radius::new(-1.0).is_err());
+    assert!(Radius::new(f32::NAN).is_err() && Radius::new(f32::INFINITY).is_err());
+    assert!(Restitution::new(0.0).is_ok() && Restitution::new(1.0).is_ok());
+    let above_one = f32::from_bits(1.0f32.to_bits() + 1);
+    assert_eq!(
+        Restitution::new(above_one).unwrap_err().to_string(),
+        format!("Restitution must be in [0, 1], got {above_one:?}")
+    );
+    assert!(Restitution::new(-0.0).is_ok() && Restitution::new(-1e-9).is_err());
+    assert!(Friction::new(0.0).is_ok() && Friction::new(-1e-9).is_err());
+    assert!(Mass::try_new(0.005).is_ok() && Mass::try_new(0.0).is_err());
+    assert!(Mass::try_new(1e-39).is_err(), "an infinite inverse");
+    assert!(Position::new(Vec3::splat(MAX_COORDINATE)).is_ok());
+    assert!(Position::new(Vec3::new(0.0, -1e38, 0.0)).is_err());
+    assert!(Velocity::new(Vec3::splat(MAX_SPEED)).is_ok());
+    assert!(Velocity::new(Vec3::new(0.0, f32::NAN, 0.0)).is_err());
+    assert!(Force::new(Vec3::INFINITY).is_err());
+    assert!(Rotation::new(glam::Quat::from_xyzw(0.0, 0.0, 0.0, 0.0)).is_err());
+    assert!(RollingResistance::new(-1.0).is_err() && SpinDamping::new(0.1).is_ok());
+}
+
+/// Scene files refuse positions and speeds outside the supported range, naming the field.
+#[test]
+fn scene_files_refuse_coordinates_out_of_range() {
+    let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
+    scene.marbles[0].position = [-1e38, 0.5, 0.0];
+    let err = scene.validate().unwrap_err().to_string();
+    assert!(
+        err.starts_with(
+            "marbles[0].position must be within 1e6 m of the origin in each coordinate, got [-1e38"
+        ),
+        "{err}"
+    );
+    let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
+    scene.marbles[0].velocity = [0.0, 0.0, 1e6];
+    let err = scene.validate().unwrap_err().to_string();
+    assert!(
+        err.starts_with("marbles[0].velocity must be within 1e5 m/s in each coordinate, got [0.0, 0.0, 1000000.0]"),
+        "{err}"
+    );
+    let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
+    scene.boards[0].position = [0.0, 2e6, 0.0];
+    assert!(
+        scene
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .starts_with("boards[0].position")
+    );
+}
+
+/// In a Bevy app: a system of the game sets a restitution of 2 in `Update`; the marble is
+/// quarantined at the next fixed step, stays put, and a reader in `Update` gets the report.
+#[cfg(feature = "bevy")]
+#[test]
+fn a_bevy_system_setting_a_bad_value_is_reported_to_the_app() {
+    use bevy_app::{App, Update};
+    use bevy_ecs::prelude::*;
+    use bevy_time::{Fixed, Time, TimePlugin, TimeUpdateStrategy};
+    use std::time::Duration;
+    #[derive(Resource, Default)]
+    struct Seen(Vec<QuarantineReport>);
+    let mut app = App::new();
+    app.add_plugins((TimePlugin, MarblePhysicsPlugin::default()));
+    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        1.0 / 64.0,
+    )));
+    app.insert_resource(Time::<Fixed>::from_seconds(1.0 / 64.0));
+    app.init_resource::<Seen>();
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Position(Vec3::new(0.0, 1.0, 0.0))))
+        .id();
+    app.add_systems(
+        Update,
+        move |mut q: Query<&mut Restitution>,
+              mut reader: MessageReader<QuarantineReport>,
+              mut seen: ResMut<Seen>| {
+            q.get_mut(marble).unwrap().0 = 2.0;
+            seen.0.extend(reader.read().cloned());
+        },
+    );
+    for _ in 0..6 {
+        app.update();
+    }
+    let w = app.world();
+    assert!(w.get::<Quarantined>(marble).is_some());
+    let seen = &w.resource::<Seen>().0;
+    assert_eq!(seen.len(), 1);
+    assert_eq!(seen[0].entity, marble);
+    assert_eq!(
+        seen[0].reason.to_string(),
+        "Restitution must be in [0, 1], got 2.0"
+    );
+    // It fell for the fixed steps before the change reached the physics, then stopped.
+    let y = w.get::<Position>(marble).unwrap().y;
+    app.update();
+    assert_eq!(app.world().get::<Position>(marble).unwrap().y, y);
+}
