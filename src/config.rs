@@ -375,4 +375,40 @@ mod tests {
             assert!((i.advance(Vec3::ZERO, Vec3::ZERO, a, tau).1.y - -1.0).abs() < 1e-6);
         }
     }
+
+    /// `Integrator::delta`, what every stage calls, over a substep τ under constant
+    /// acceleration `a` from velocity `v`: each integrator's exact parabola, offset as its
+    /// type's docs say (Verlet and RK4: `v τ + ½ a τ²`; semi-implicit Euler: `(v + a τ) τ`;
+    /// explicit Euler: `v τ`), and the velocity change `a τ` for all; `advance` adds it.
+    #[test]
+    fn delta_is_each_integrators_step() {
+        let (v, a, tau) = (Vec3::new(1.5, 2.0, -0.5), Vec3::new(0.3, -9.81, 0.2), 0.01);
+        let want = |i: Integrator| match i {
+            Integrator::VelocityVerlet | Integrator::Rk4 => v * tau + 0.5 * a * tau * tau,
+            Integrator::SemiImplicitEuler => (v + a * tau) * tau,
+            Integrator::ExplicitEuler => v * tau,
+        };
+        for i in Integrator::ALL {
+            let (dx, dv) = i.delta(v, a, tau);
+            assert!(
+                (dx - want(i)).length() <= 1e-7,
+                "{i:?}: {dx} against {}",
+                want(i)
+            );
+            assert!((dv - a * tau).length() <= 1e-7, "{i:?}: {dv}");
+            let x0 = Vec3::new(3.0, 1.0, 2.0);
+            let (x, v1) = i.advance(x0, v, a, tau);
+            assert!((x - (x0 + dx)).length() <= 1e-6 && (v1 - (v + dv)).length() <= 1e-7);
+        }
+        // The semi-implicit and explicit Euler parabolas differ from the exact one by
+        // `± ½ a τ²`, the offset `velocity_offset` gives as a velocity.
+        let exact = v * tau + 0.5 * a * tau * tau;
+        for i in [Integrator::SemiImplicitEuler, Integrator::ExplicitEuler] {
+            let off = i.velocity_offset(a, tau) * tau;
+            assert!(
+                (i.delta(v, a, tau).0 - (exact + off)).length() <= 1e-7,
+                "{i:?}"
+            );
+        }
+    }
 }

@@ -439,3 +439,74 @@ fn cli_tradeoff_quick() {
         assert!(svg.starts_with("<svg") && svg.contains("Pareto"), "{name}");
     }
 }
+
+/// An interrupted run (SIGTERM, or SIGINT as Ctrl-C sends, in the middle of stepping)
+/// leaves no CSV or plot under the asked-for names: they are written under temporary
+/// names and renamed into place only once complete.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_run_leaves_no_output_that_looks_complete() {
+    for signal in ["-TERM", "-INT"] {
+        let dir = temp_dir(&format!("interrupted{signal}"));
+        let scene = dir.join("pour.ron");
+        let mut s = scenes::pour_box(2000);
+        s.duration = 600.0;
+        std::fs::write(&scene, ron::to_string(&s).unwrap()).unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_marble"))
+            .args([
+                "run", "pour.ron", "--csv", "out.csv", "--plot", "out.svg", "--quiet",
+            ])
+            .current_dir(&dir)
+            .spawn()
+            .expect("marble runs");
+        std::thread::sleep(std::time::Duration::from_millis(1500));
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "still running when interrupted"
+        );
+        let killed = Command::new("kill")
+            .args([signal, &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        let status = child.wait().unwrap();
+        assert!(!status.success(), "{signal}: {status:?}");
+        assert!(
+            !dir.join("out.csv").exists(),
+            "{signal}: out.csv left behind"
+        );
+        assert!(
+            !dir.join("out.svg").exists(),
+            "{signal}: out.svg left behind"
+        );
+    }
+}
+
+/// A restitution of exactly 0 and exactly 1 is accepted, the next f32 above 1 and the
+/// next below 0 refused, for marbles and boards alike.
+#[test]
+fn restitution_bounds_are_exact_for_marbles_and_boards() {
+    let above = f32::from_bits(1.0f32.to_bits() + 1);
+    let below = -f32::from_bits(1);
+    for e in [0.0f32, 1.0] {
+        let mut s = scenes::drop_on_plane(0.5, 0.008, e);
+        s.boards[0].restitution = e;
+        assert!(s.validate().is_ok(), "e = {e}");
+    }
+    for e in [above, below] {
+        let mut s = scenes::drop_on_plane(0.5, 0.008, 0.5);
+        s.marbles[0].restitution = e;
+        let err = s.validate().unwrap_err().to_string();
+        assert_eq!(
+            err,
+            format!("marbles[0].restitution must be in [0, 1], got {e}")
+        );
+        let mut s = scenes::drop_on_plane(0.5, 0.008, 0.5);
+        s.boards[0].restitution = e;
+        let err = s.validate().unwrap_err().to_string();
+        assert_eq!(
+            err,
+            format!("boards[0].restitution must be in [0, 1], got {e}")
+        );
+    }
+}
