@@ -209,7 +209,37 @@ pub(crate) struct MarbleValues<'a> {
     pub(crate) spin_damping: Option<&'a SpinDamping>,
 }
 
-impl MarbleValues<'_> {
+impl<'a> MarbleValues<'a> {
+    /// The values as the validation's queries hand them over.
+    pub(crate) fn new(
+        (position, velocity, force, radius, mass): (
+            &'a Position,
+            &'a Velocity,
+            &'a Force,
+            &'a Radius,
+            &'a Mass,
+        ),
+        (restitution, friction): (&'a Restitution, &'a Friction),
+        (spin, rolling_resistance, spin_damping): (
+            Option<&'a AngularVelocity>,
+            Option<&'a RollingResistance>,
+            Option<&'a SpinDamping>,
+        ),
+    ) -> Self {
+        MarbleValues {
+            position,
+            velocity,
+            force,
+            radius,
+            mass,
+            restitution,
+            friction,
+            spin,
+            rolling_resistance,
+            spin_damping,
+        }
+    }
+
     /// The first bad value, if any.
     #[inline]
     pub(crate) fn check(&self) -> Result<(), InvalidValue> {

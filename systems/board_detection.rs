@@ -39,17 +39,7 @@ pub fn detect_board_contacts(
     let stage = Stage::new(&config, &cache, substep.h);
     let each = |touches: &mut TouchList, m: BoardStagedItem<'_, '_>| {
         let material = smooth_material(m.restitution);
-        let motion = (m.position, m.carry, m.velocity, None);
-        stage.detect(
-            touches,
-            motion,
-            m.start,
-            m.acceleration,
-            m.radius.0,
-            material,
-            m.contacts,
-            m.near,
-        );
+        stage.detect_staged(touches, m, None, material);
     };
     super::for_each_marble!(marbles, each);
 }
@@ -68,17 +58,7 @@ pub fn detect_board_contacts_spinning(
     let each = |touches: &mut TouchList,
                 (m, s): (BoardStagedItem<'_, '_>, SpinStagedItem<'_, '_>)| {
         let material = s.material(m.restitution);
-        let motion = (m.position, m.carry, m.velocity, Some(s.spin));
-        stage.detect(
-            touches,
-            motion,
-            m.start,
-            m.acceleration,
-            m.radius.0,
-            material,
-            m.contacts,
-            m.near,
-        );
+        stage.detect_staged(touches, m, Some(s.spin), material);
     };
     super::for_each_marble!(marbles, each);
 }
@@ -108,6 +88,29 @@ impl<'a> Stage<'a> {
             params: SubstepParams::from_config(config, h),
             h,
         }
+    }
+
+    /// [`Stage::detect`] for a marble's staged components, handed over one by one (always
+    /// inlined: passing the whole item costs a copy of it per marble).
+    #[inline(always)]
+    fn detect_staged(
+        &self,
+        touches: &mut TouchList,
+        m: BoardStagedItem<'_, '_>,
+        spin: Option<Mut<AngularVelocity>>,
+        material: Material,
+    ) {
+        let motion = (m.position, m.carry, m.velocity, spin);
+        self.detect(
+            touches,
+            motion,
+            m.start,
+            m.acceleration,
+            m.radius.0,
+            material,
+            m.contacts,
+            m.near,
+        );
     }
 
     /// One marble's detection (see [`detect_board_contacts`]): its motion state (with its

@@ -106,23 +106,23 @@ pub fn validate(
         if ok {
             continue;
         }
-        let values = MarbleValues {
-            position,
-            velocity,
-            force,
-            radius,
-            mass,
-            restitution,
-            friction,
-            spin: None,
-            rolling_resistance: None,
-            spin_damping: None,
-        };
+        let values = MarbleValues::new(
+            (position, velocity, force, radius, mass),
+            (restitution, friction),
+            (None, None, None),
+        );
         if let Err(reason) = values.check() {
             quarantine(&mut commands, &mut reports, entity, reason);
         }
     }
     for (entity, spin, rolling_resistance, spin_damping) in &spinning {
+        let in_range = |c: f32| (0.0..=f32::MAX).contains(&c);
+        let ok = spin.0.is_finite()
+            & rolling_resistance.is_none_or(|c| in_range(c.0))
+            & spin_damping.is_none_or(|k| in_range(k.0));
+        if ok {
+            continue;
+        }
         let check = AngularVelocity::new(spin.0)
             .and(rolling_resistance.map_or(Ok(()), |c| RollingResistance::new(c.0).map(|_| ())))
             .and(spin_damping.map_or(Ok(()), |k| SpinDamping::new(k.0).map(|_| ())));
@@ -130,23 +130,8 @@ pub fn validate(
             quarantine(&mut commands, &mut reports, entity, reason);
         }
     }
-    for (entity, (position, velocity, force, radius, mass), (restitution, friction), extra) in
-        &changed_asleep
-    {
-        let (spin, rolling_resistance, spin_damping) = extra;
-        let values = MarbleValues {
-            position,
-            velocity,
-            force,
-            radius,
-            mass,
-            restitution,
-            friction,
-            spin,
-            rolling_resistance,
-            spin_damping,
-        };
-        if let Err(reason) = values.check() {
+    for (entity, values, material, extra) in &changed_asleep {
+        if let Err(reason) = MarbleValues::new(values, material, extra).check() {
             quarantine(&mut commands, &mut reports, entity, reason);
         }
     }
