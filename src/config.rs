@@ -91,9 +91,19 @@ impl Integrator {
     #[inline]
     pub fn velocity_offset(self, a: Vec3, h: f32) -> Vec3 {
         match self {
-            Integrator::SemiImplicitEuler => a * (0.5 * h),
-            Integrator::ExplicitEuler => a * (-0.5 * h),
             Integrator::VelocityVerlet | Integrator::Rk4 => Vec3::ZERO,
+            _ => a * self.velocity_lead(h),
+        }
+    }
+
+    /// `(c − ½) h`: how far, in time, the path velocity is ahead of the reported one
+    /// (`h/2` for semi-implicit Euler, `−h/2` for explicit Euler, 0 for the others).
+    #[inline]
+    pub fn velocity_lead(self, h: f32) -> f32 {
+        match self {
+            Integrator::SemiImplicitEuler => 0.5 * h,
+            Integrator::ExplicitEuler => -0.5 * h,
+            Integrator::VelocityVerlet | Integrator::Rk4 => 0.0,
         }
     }
 }

@@ -60,7 +60,11 @@
 //!   about the normal; both are opt-in (default 0).
 //!
 //! The forces are constant over each stretch between events, so the exact-parabola path
-//! and the spin `ω + α τ` stay exact there.
+//! and the spin `ω + α τ` stay exact there. On a turning board the slip also changes with
+//! the material under the contact ([`board_slip_rate`]), which static friction holds
+//! against. For the Euler schemes, whose reported velocities lag or lead the path, the
+//! regime and the hold of each touch are decided on the path's state ([`lead_in`],
+//! [`normal_speed`]; `docs/PHYSICS.md` §5).
 //!
 //! The commonest case — a marble on one convex piece of a still board, not leaving it,
 //! with nothing else within reach of its substep — has this loop's result in closed form
@@ -246,22 +250,26 @@ fn resolve_with<const SPINS: bool>(
     // accelerations left after the constraints and friction of the touches.
     let mut motion = match found {
         Found::Touching => {
+            // The start's velocities are the integrator's reported ones, `lead` seconds
+            // behind the path (see `lead_in`).
+            let lead = p.integrator.velocity_lead(p.h);
             respond::<SPINS>(
                 touches.as_slice(),
                 &mut s,
                 p.threshold,
                 boards,
                 0.0,
+                lead,
+                m.a,
                 contacts,
             );
-            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, true);
-            s.v += offset(motion.a);
+            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, true, lead);
             if SPINS {
-                // The spin gets the same offset, so that a marble rolling in the
-                // integrator's terms also rolls on the path.
-                s.w += offset(motion.alpha);
+                lead_in(touches.as_slice(), &mut s, m.a, sep, motion, lead)
+            } else {
+                s.v += offset(motion.a);
+                motion
             }
-            motion
         }
         Found::Impact(tau) => {
             s.v += offset(m.a);
@@ -269,8 +277,17 @@ fn resolve_with<const SPINS: bool>(
             t = tau;
             impacts = 1;
             regather(t, &s, touches);
-            respond::<SPINS>(touches.as_slice(), &mut s, p.threshold, boards, t, contacts);
-            settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false)
+            respond::<SPINS>(
+                touches.as_slice(),
+                &mut s,
+                p.threshold,
+                boards,
+                t,
+                0.0,
+                m.a,
+                contacts,
+            );
+            settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0)
         }
         Found::Overlap => {
             s.v += offset(m.a);
@@ -301,8 +318,17 @@ fn resolve_with<const SPINS: bool>(
                 settled_start = false;
                 impacts += 1;
                 regather(t, &s, touches);
-                respond::<SPINS>(touches.as_slice(), &mut s, p.threshold, boards, t, contacts);
-                motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false);
+                respond::<SPINS>(
+                    touches.as_slice(),
+                    &mut s,
+                    p.threshold,
+                    boards,
+                    t,
+                    0.0,
+                    m.a,
+                    contacts,
+                );
+                motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0);
                 continue;
             }
         }
@@ -311,7 +337,7 @@ fn resolve_with<const SPINS: bool>(
             t += reach;
             settled_start = false;
             regather(t, &s, touches);
-            motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false);
+            motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0);
             continue;
         }
         t = p.h;
@@ -345,9 +371,22 @@ fn resolve_with<const SPINS: bool>(
 
     // End of substep: resolve what still overlaps, or touches while approaching.
     regather(p.h, &s, touches);
+    let held_throughout = settled_start && t >= p.h;
     for tc in touches.as_slice() {
         let u = (s.v - tc.board_velocity).dot(tc.normal);
         if tc.gap >= 0.0 && u >= 0.0 {
+            // A marble held on a turning board all substep ends with the drift of its
+            // held path (constant accelerations, while the board's normal and the
+            // Coriolis term turn): a normal speed of order `h²` times their rate, which
+            // the next substep would take for leaving. When the pull into the surface
+            // would bring it back before it rose beyond the touching tolerance
+            // (`u² ≤ 2 |a_n| tol`), it is not leaving: the drift is removed.
+            if held_throughout && u > 0.0 && tc.board_spin != Vec3::ZERO {
+                let pull = m.a.dot(tc.normal) - surface_need(tc, s.v - tc.board_velocity);
+                if pull < 0.0 && u * u <= -2.0 * pull * tol {
+                    s.v -= u * tc.normal;
+                }
+            }
             record(contacts, boards, tc, ContactKind::Contact, u, p.h);
             continue;
         }
@@ -374,16 +413,26 @@ fn resolve_with<const SPINS: bool>(
     }
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
-    let end = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false);
+    let end = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0);
     if settled_start
         && t >= p.h
         && matches!(p.integrator, Integrator::VelocityVerlet | Integrator::Rk4)
+        && !touches.as_slice().is_empty()
+        && touches
+            .as_slice()
+            .iter()
+            .all(|tc| (s.v - tc.board_velocity).dot(tc.normal) <= sep)
     {
-        // On a curved surface the constrained acceleration depends on where the marble
-        // is (a marble in a bowl is a pendulum). The path above held the start's value;
-        // velocity Verlet takes the mean of the start's and the end's, which keeps the
-        // oscillation's energy bounded instead of growing. (On flat surfaces the two are
-        // equal and nothing changes.) The correction stays in the surface.
+        // On a curved surface, or a turning one, the constrained acceleration depends on
+        // where the marble is and how it moves (a marble in a bowl is a pendulum; the
+        // Coriolis term of a turning board follows the marble's speed). The path above
+        // held the start's value; velocity Verlet takes the mean of the start's and the
+        // end's, which keeps the oscillation's energy bounded instead of growing and the
+        // turning board's path second order. (On still flat surfaces the two are equal and
+        // nothing changes.) The correction stays in the surface, and is made only when the
+        // marble is still held by it at the end: a marble found off its surface there (a
+        // drift of the held path by a fraction of a micrometre) has no end constraint to
+        // average with, and gravity's full pull would be mistaken for one.
         let mut dv = 0.5 * p.h * (end.a - motion.a);
         for tc in touches.as_slice() {
             dv -= dv.dot(tc.normal) * tc.normal;
@@ -459,7 +508,7 @@ pub fn resolve_resting(
     for _ in 0..4 {
         let rel = v - vb;
         let an = if rel.dot(n) <= sep {
-            let need = tc.surface_accel - 2.0 * rel.dot(tc.board_spin.cross(n));
+            let need = tc.board_accel.dot(n) - 2.0 * rel.dot(tc.board_spin.cross(n));
             a.dot(n) - need
         } else {
             0.0
@@ -514,10 +563,16 @@ pub fn resolve_rolling(
     };
     let touch = std::slice::from_ref(tc);
     contacts.clear();
-    respond::<true>(touch, &mut s, p.threshold, boards, 0.0, contacts);
-    let motion = settle::<true>(touch, &mut s, m.a, sep, true);
-    if motion.slip_stops.is_some_and(|ts| ts < p.h) {
-        return None;
+    let lead = p.integrator.velocity_lead(p.h);
+    respond::<true>(touch, &mut s, p.threshold, boards, 0.0, lead, m.a, contacts);
+    let mut motion = settle::<true>(touch, &mut s, m.a, sep, true, lead);
+    if let Some(ts) = motion.slip_stops {
+        // `lead_in` without an event in the lead, and none in the substep after it.
+        let after = ts - lead;
+        if (lead > 0.0 && ts < lead) || after < p.h {
+            return None;
+        }
+        motion.slip_stops = Some(after);
     }
     s.v += offset(motion.a);
     s.w += offset(motion.alpha);
@@ -529,6 +584,43 @@ pub fn resolve_rolling(
         v: s.v - offset(motion.a),
         w: s.w - offset(motion.alpha),
     })
+}
+
+/// From the integrator's reported velocity and spin to the path's, for a marble that
+/// spins and touches at the substep's start: the path is `lead` seconds ahead
+/// ([`Integrator::velocity_lead`]), so over those seconds the velocity and spin change
+/// at the touches' accelerations, and a friction event that falls inside them (a slip that
+/// stops) changes the regime there, as in the event loop. Deciding the regime on the
+/// reported velocities alone would let the path overshoot the stop by `lead`: a slip
+/// reversed every substep, rolling never reached, and on a turning board energy gained.
+/// Returns the motion at the path's start, its event times counted from there.
+#[inline]
+fn lead_in(
+    list: &[Touch],
+    s: &mut State,
+    a: Vec3,
+    sep: f32,
+    mut motion: Motion,
+    lead: f32,
+) -> Motion {
+    let mut left = lead;
+    // A regime change takes a slip to rolling or a spin to rest, each at most once; the
+    // bound only guards against rounding.
+    for _ in 0..4 {
+        match motion.slip_stops {
+            Some(ts) if ts < left => {
+                s.v += motion.a * ts;
+                s.w += motion.alpha * ts;
+                left -= ts;
+                motion = settle::<true>(list, s, a, sep, false, left);
+            }
+            _ => break,
+        }
+    }
+    s.v += motion.a * left;
+    s.w += motion.alpha * left;
+    motion.slip_stops = motion.slip_stops.map(|ts| ts - left);
+    motion
 }
 
 /// Free motion under `a`: no constraint, no friction.
@@ -575,20 +667,24 @@ fn push_tangential(s: &mut State, n: Vec3, j: Vec3) {
 
 /// Step 2 of the module docs: collisions get equation (1), contacts lose their approaching
 /// normal velocity, and (for spinning marbles) friction impulses at most `μ` × each normal
-/// impulse act against the slip; every touch is recorded.
+/// impulse act against the slip; every touch is recorded. `lag`: how far the state is
+/// behind the board's under the free acceleration `a` ([`normal_speed`]).
+#[allow(clippy::too_many_arguments)]
 fn respond<const SPINS: bool>(
     list: &[Touch],
     s: &mut State,
     threshold: f32,
     boards: &[BoardSnapshot],
     t: f32,
+    lag: f32,
+    a: Vec3,
     contacts: &mut Contacts,
 ) {
     let mut target = [f32::NEG_INFINITY; MAX_TOUCHES];
     let mut normal_impulse = [0.0f32; MAX_TOUCHES];
     let mut any = false;
     for (i, tc) in list.iter().enumerate() {
-        let u = (s.v - tc.board_velocity).dot(tc.normal);
+        let u = normal_speed(tc, s.v - tc.board_velocity, lag, a);
         let kind = if u < -threshold {
             ContactKind::Collision
         } else {
@@ -612,7 +708,7 @@ fn respond<const SPINS: bool>(
     for _ in 0..4 {
         let mut changed = false;
         for (i, tc) in list.iter().enumerate() {
-            let u = (s.v - tc.board_velocity).dot(tc.normal);
+            let u = normal_speed(tc, s.v - tc.board_velocity, lag, a);
             if u < target[i] {
                 s.v += (target[i] - u) * tc.normal;
                 normal_impulse[i] += target[i] - u;
@@ -657,10 +753,11 @@ fn settle<const SPINS: bool>(
     a: Vec3,
     sep: f32,
     overlap: bool,
+    lag: f32,
 ) -> Motion {
     let mut a = a;
     for tc in list {
-        let u = (s.v - tc.board_velocity).dot(tc.normal);
+        let u = normal_speed(tc, s.v - tc.board_velocity, lag, a);
         if u <= sep {
             if tc.gap > 0.0 || (overlap && tc.gap < 0.0) {
                 s.d -= tc.gap * tc.normal;
@@ -673,14 +770,9 @@ fn settle<const SPINS: bool>(
         let mut changed = false;
         for (i, tc) in list.iter().enumerate() {
             let rel = s.v - tc.board_velocity;
-            if rel.dot(tc.normal) <= sep {
-                // Staying on the surface takes the surface's own normal acceleration. On a
-                // turning board the contact point slides over material points of different
-                // velocities (v_b(p) changes at a_b + ω × (v − v_b)) while the normal turns
-                // (ṅ = ω × n), so d/dt((v − v_b)·n) = (a − a_b)·n + 2 (v − v_b)·(ω × n),
-                // centripetal and Coriolis terms, must stay ≥ 0.
-                let need = tc.surface_accel - 2.0 * rel.dot(tc.board_spin.cross(tc.normal));
-                let an = a.dot(tc.normal) - need;
+            if normal_speed(tc, rel, lag, a) <= sep {
+                // Held on the surface when the path starts, `lag` later.
+                let an = a.dot(tc.normal) - surface_need(tc, rel + lag * a);
                 if an < 0.0 {
                     a -= an * tc.normal;
                     if SPINS {
@@ -698,19 +790,47 @@ fn settle<const SPINS: bool>(
     if SPINS {
         for (i, tc) in list.iter().enumerate() {
             if normal_force[i] > 0.0 {
-                friction(s, tc, normal_force[i], &mut motion);
+                friction(s, tc, normal_force[i], lag, &mut motion);
             }
         }
     }
     motion
 }
 
+/// The normal acceleration a marble at velocity `rel` relative to the touch's board needs
+/// to stay on its surface. On a turning board the contact point slides over material
+/// points of different velocities (`v_b(p)` changes at `a_b + ω × (v − v_b)`) while the
+/// normal turns (`ṅ = ω × n`), so `d/dt((v − v_b)·n) = (a − a_b)·n + 2 (v − v_b)·(ω × n)`,
+/// centripetal and Coriolis terms, must stay ≥ 0.
+#[inline]
+fn surface_need(tc: &Touch, rel: Vec3) -> f32 {
+    tc.board_accel.dot(tc.normal) - 2.0 * rel.dot(tc.board_spin.cross(tc.normal))
+}
+
+/// The normal speed `rel·n` that decides whether a marble stays on a touch, for a state
+/// `lag` seconds behind the board's (see [`friction`]) under the free acceleration `a`: a
+/// marble held on a turning board's surface has normal acceleration [`surface_need`] (of
+/// its velocity then, whose tangential part is `rel + lag a`'s), so its lagging state
+/// reports `lag` times that less than the path will have.
+#[inline]
+fn normal_speed(tc: &Touch, rel: Vec3, lag: f32, a: Vec3) -> f32 {
+    let u = rel.dot(tc.normal);
+    if lag != 0.0 && tc.board_spin != Vec3::ZERO {
+        u + lag * surface_need(tc, rel + lag * a)
+    } else {
+        u
+    }
+}
+
 /// Slip below this speed (m/s) is rolling.
 const ROLLING_SLIP: f32 = 1e-5;
 
 /// Friction, rolling resistance and spin damping of one sustained touch with normal force
-/// `nf` per unit mass, added to `motion` (module docs, "Rolling").
-fn friction(s: &mut State, tc: &Touch, nf: f32, motion: &mut Motion) {
+/// `nf` per unit mass, added to `motion` (module docs, "Rolling"). `lag`: how many seconds
+/// the marble's state is behind the board's (the reported velocities of an integrator
+/// whose path leads them, [`lead_in`]); over that time a rolling marble's slip against a
+/// turning board's material changes at [`board_slip_rate`], so that is the slip it has.
+fn friction(s: &mut State, tc: &Touch, nf: f32, lag: f32, motion: &mut Motion) {
     let n = tc.normal;
     let r = s.r;
     let rc = -r * n;
@@ -732,12 +852,21 @@ fn friction(s: &mut State, tc: &Touch, nf: f32, motion: &mut Motion) {
         alpha -= sd * w_n.signum() * n;
         stop_at(motion, w_n.abs() / sd);
     }
-    // The contact point's tangential acceleration without friction.
+    // The slip's rate of change without friction: the contact point's acceleration, less
+    // what the board's material under it does (`board_slip_rate`, zero on boards that do
+    // not turn), tangential part.
     let a_c = {
-        let raw = motion.a + (motion.alpha + alpha).cross(rc);
+        let mut raw = motion.a + (motion.alpha + alpha).cross(rc);
+        if tc.board_spin != Vec3::ZERO {
+            raw -= board_slip_rate(s, tc);
+        }
         raw - raw.dot(n) * n
     };
-    let slip = slip(s, tc);
+    let mut slip = slip(s, tc);
+    if lag != 0.0 && tc.board_spin != Vec3::ZERO {
+        let lagged = lag * board_slip_rate(s, tc);
+        slip += lagged - lagged.dot(n) * n;
+    }
     let f = if slip.length() <= ROLLING_SLIP {
         // Rolling: remove the residual slip (rounding), then hold it at zero with static
         // friction if Coulomb allows.
@@ -770,6 +899,21 @@ fn friction(s: &mut State, tc: &Touch, nf: f32, motion: &mut Motion) {
     }
     motion.a += f;
     motion.alpha += alpha;
+}
+
+/// What a turning board adds to the rate of change of the slip (module docs, "Rolling"):
+/// with the board turning at a constant `Ω` about a centre moving at constant velocity,
+/// and the contact point `p = x − r n` moving over it, the slip `σ = v + ω × (−r n) − v_b(p)`
+/// changes at `a + α × (−r n)` minus
+/// `a_b(p) + Ω × (v − v_b(p)) + r ω × (Ω × n) − r Ω × (Ω × n)`: the material point's own
+/// acceleration, and the turning of the normal and of the material under a moving contact.
+/// Static friction holds the slip at zero against this, so that a marble rolls on a
+/// turning board as on a still one.
+#[inline]
+fn board_slip_rate(s: &State, tc: &Touch) -> Vec3 {
+    let (n, om) = (tc.normal, tc.board_spin);
+    let om_n = om.cross(n);
+    tc.board_accel + om.cross(s.v - tc.board_velocity) + s.r * (s.w.cross(om_n) - om.cross(om_n))
 }
 
 /// Notes that the friction regime changes (a slip or a spin stops) `after` seconds.

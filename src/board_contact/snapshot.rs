@@ -81,16 +81,16 @@ impl BoardSnapshot {
         }
     }
 
-    /// Normal component (along `n`) of the acceleration of the board's material point at
-    /// world point `p`, time `t`: the centripetal `ω × (ω × (p − c))` of its turning.
+    /// Acceleration of the board's material point at world point `p`, time `t`: the
+    /// centripetal `ω × (ω × (p − c))` of its turning (boards move at constant velocity and
+    /// turn at constant rate over a step).
     #[inline]
-    pub fn surface_accel(&self, t: f32, p: Vec3, n: Vec3) -> f32 {
+    pub fn point_accel(&self, t: f32, p: Vec3) -> Vec3 {
         if self.angular_velocity == Vec3::ZERO {
-            return 0.0;
+            return Vec3::ZERO;
         }
         let w = self.angular_velocity;
         w.cross(w.cross(p - (self.position + self.velocity * t)))
-            .dot(n)
     }
 
     /// Velocity of the board's material point at world point `p`, time `t`.

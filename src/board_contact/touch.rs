@@ -16,10 +16,12 @@ pub struct Touch {
     pub gap: f32,
     /// Board material velocity at `point`.
     pub board_velocity: Vec3,
-    /// Normal acceleration the marble needs to stay on a turning board's surface:
-    /// `(ω × (ω × (p − c)))·n` of the surface point (zero for boards that do not turn).
-    /// The term `−(v − v_b)·(ω × n)` of the turning normal is added where `v` is known.
-    pub surface_accel: f32,
+    /// Board material acceleration at `point`: the centripetal `ω × (ω × (p − c))` of a
+    /// turning board (zero for boards that do not turn). Its normal part is what a marble
+    /// needs to stay on the surface, its tangential part what a rolling marble's contact
+    /// point must follow; the terms of the turning normal that depend on the marble's
+    /// velocity are added where that is known.
+    pub board_accel: Vec3,
     /// The board's angular velocity (zero when it does not turn).
     pub board_spin: Vec3,
     /// Combined material of the pair (averages of the two parties' coefficients).
@@ -92,7 +94,7 @@ impl Default for TouchList {
                 normal: Vec3::Y,
                 gap: 0.0,
                 board_velocity: Vec3::ZERO,
-                surface_accel: 0.0,
+                board_accel: Vec3::ZERO,
                 board_spin: Vec3::ZERO,
                 material: Material::default(),
                 convex: true,
@@ -160,7 +162,7 @@ impl TouchList {
             normal: c.normal,
             gap: -c.depth,
             board_velocity: b.point_velocity(0.0, c.point),
-            surface_accel: b.surface_accel(0.0, c.point, c.normal),
+            board_accel: b.point_accel(0.0, c.point),
             board_spin: b.angular_velocity,
             material: marble.combine(b),
             convex: b.geometry.part_is_convex(c.piece.part()),
@@ -265,7 +267,7 @@ pub fn gather(
                         normal: q * p.normal,
                         gap,
                         board_velocity: b.point_velocity(t, point),
-                        surface_accel: b.surface_accel(t, point, q * p.normal),
+                        board_accel: b.point_accel(t, point),
                         board_spin: b.angular_velocity,
                         material: material.combine(b),
                         convex: piece.is_convex(),
