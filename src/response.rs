@@ -253,17 +253,18 @@ fn resolve_with<const SPINS: bool>(
             // The start's velocities are the integrator's reported ones, `lead` seconds
             // behind the path (see `lead_in`).
             let lead = p.integrator.velocity_lead(p.h);
+            let lag = lead;
             respond::<SPINS>(
                 touches.as_slice(),
                 &mut s,
                 p.threshold,
                 boards,
                 0.0,
-                lead,
+                lag,
                 m.a,
                 contacts,
             );
-            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, true, lead);
+            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, true, lag);
             if SPINS {
                 lead_in(touches.as_slice(), &mut s, m.a, sep, motion, lead)
             } else {
@@ -563,9 +564,12 @@ pub fn resolve_rolling(
     };
     let touch = std::slice::from_ref(tc);
     contacts.clear();
+    // A still board: the lag of the reported velocities changes nothing in the response,
+    // and the turning-board terms are all zero (see `settle`).
+    debug_assert!(tc.board_spin == Vec3::ZERO);
     let lead = p.integrator.velocity_lead(p.h);
-    respond::<true>(touch, &mut s, p.threshold, boards, 0.0, lead, m.a, contacts);
-    let mut motion = settle::<true>(touch, &mut s, m.a, sep, true, lead);
+    respond_on::<true, false>(touch, &mut s, p.threshold, boards, 0.0, 0.0, m.a, contacts);
+    let mut motion = settle_on::<true, false>(touch, &mut s, m.a, sep, true, 0.0);
     if let Some(ts) = motion.slip_stops {
         // `lead_in` without an event in the lead, and none in the substep after it.
         let after = ts - lead;
@@ -670,7 +674,37 @@ fn push_tangential(s: &mut State, n: Vec3, j: Vec3) {
 /// impulse act against the slip; every touch is recorded. `lag`: how far the state is
 /// behind the board's under the free acceleration `a` ([`normal_speed`]).
 #[allow(clippy::too_many_arguments)]
+#[inline]
 fn respond<const SPINS: bool>(
+    list: &[Touch],
+    s: &mut State,
+    threshold: f32,
+    boards: &[BoardSnapshot],
+    t: f32,
+    lag: f32,
+    a: Vec3,
+    contacts: &mut Contacts,
+) {
+    if turns(list) {
+        respond_on::<SPINS, true>(list, s, threshold, boards, t, lag, a, contacts);
+    } else {
+        respond_on::<SPINS, false>(list, s, threshold, boards, t, 0.0, a, contacts);
+    }
+}
+
+/// Whether any of the touches is on a turning board. The response and the hold are
+/// written twice ([`respond_on`], [`settle_on`]): with the turning-board terms, and
+/// without them for the common case of still boards, which then carries not even their
+/// tests (nor the register pressure of their out-of-line calls) in its loops.
+#[inline]
+fn turns(list: &[Touch]) -> bool {
+    list.iter().any(|tc| tc.board_spin != Vec3::ZERO)
+}
+
+/// [`respond`] on touches that may be on turning boards (`TURNING`) or are not.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn respond_on<const SPINS: bool, const TURNING: bool>(
     list: &[Touch],
     s: &mut State,
     threshold: f32,
@@ -682,9 +716,17 @@ fn respond<const SPINS: bool>(
 ) {
     let mut target = [f32::NEG_INFINITY; MAX_TOUCHES];
     let mut normal_impulse = [0.0f32; MAX_TOUCHES];
+    // The lag's share of each normal speed (`normal_speed`), taken once: the impulses
+    // below act along normals, to which the Coriolis term's `ω × n` is perpendicular.
+    let mut shift = [0.0f32; MAX_TOUCHES];
     let mut any = false;
     for (i, tc) in list.iter().enumerate() {
-        let u = normal_speed(tc, s.v - tc.board_velocity, lag, a);
+        let rel = s.v - tc.board_velocity;
+        let mut u = rel.dot(tc.normal);
+        if TURNING && lag != 0.0 && tc.board_spin != Vec3::ZERO {
+            shift[i] = lagged_need(tc, rel, lag, a);
+            u += shift[i];
+        }
         let kind = if u < -threshold {
             ContactKind::Collision
         } else {
@@ -708,7 +750,10 @@ fn respond<const SPINS: bool>(
     for _ in 0..4 {
         let mut changed = false;
         for (i, tc) in list.iter().enumerate() {
-            let u = normal_speed(tc, s.v - tc.board_velocity, lag, a);
+            let mut u = (s.v - tc.board_velocity).dot(tc.normal);
+            if TURNING {
+                u += shift[i];
+            }
             if u < target[i] {
                 s.v += (target[i] - u) * tc.normal;
                 normal_impulse[i] += target[i] - u;
@@ -755,9 +800,26 @@ fn settle<const SPINS: bool>(
     overlap: bool,
     lag: f32,
 ) -> Motion {
+    if turns(list) {
+        settle_on::<SPINS, true>(list, s, a, sep, overlap, lag)
+    } else {
+        settle_on::<SPINS, false>(list, s, a, sep, overlap, 0.0)
+    }
+}
+
+/// [`settle`] on touches that may be on turning boards (`TURNING`) or are not.
+#[inline]
+fn settle_on<const SPINS: bool, const TURNING: bool>(
+    list: &[Touch],
+    s: &mut State,
+    a: Vec3,
+    sep: f32,
+    overlap: bool,
+    lag: f32,
+) -> Motion {
     let mut a = a;
     for tc in list {
-        let u = normal_speed(tc, s.v - tc.board_velocity, lag, a);
+        let u = normal_speed::<TURNING>(tc, s.v - tc.board_velocity, lag, a);
         if u <= sep {
             if tc.gap > 0.0 || (overlap && tc.gap < 0.0) {
                 s.d -= tc.gap * tc.normal;
@@ -765,14 +827,24 @@ fn settle<const SPINS: bool>(
             s.v -= u * tc.normal;
         }
     }
+    // Which touches hold the marble, and the normal acceleration each needs (of the
+    // velocity when the path starts, `lag` later): the loop below changes only the
+    // acceleration, so both are taken once.
+    let mut held = [false; MAX_TOUCHES];
+    let mut need = [0.0f32; MAX_TOUCHES];
+    for (i, tc) in list.iter().enumerate() {
+        let rel = s.v - tc.board_velocity;
+        held[i] = normal_speed::<TURNING>(tc, rel, lag, a) <= sep;
+        if TURNING && tc.board_spin != Vec3::ZERO {
+            need[i] = turning_need(tc, rel, lag, a);
+        }
+    }
     let mut normal_force = [0.0f32; MAX_TOUCHES];
     for _ in 0..4 {
         let mut changed = false;
         for (i, tc) in list.iter().enumerate() {
-            let rel = s.v - tc.board_velocity;
-            if normal_speed(tc, rel, lag, a) <= sep {
-                // Held on the surface when the path starts, `lag` later.
-                let an = a.dot(tc.normal) - surface_need(tc, rel + lag * a);
+            if held[i] {
+                let an = a.dot(tc.normal) - need[i];
                 if an < 0.0 {
                     a -= an * tc.normal;
                     if SPINS {
@@ -790,7 +862,7 @@ fn settle<const SPINS: bool>(
     if SPINS {
         for (i, tc) in list.iter().enumerate() {
             if normal_force[i] > 0.0 {
-                friction(s, tc, normal_force[i], lag, &mut motion);
+                friction::<TURNING>(s, tc, normal_force[i], lag, &mut motion);
             }
         }
     }
@@ -813,13 +885,27 @@ fn surface_need(tc: &Touch, rel: Vec3) -> f32 {
 /// its velocity then, whose tangential part is `rel + lag a`'s), so its lagging state
 /// reports `lag` times that less than the path will have.
 #[inline]
-fn normal_speed(tc: &Touch, rel: Vec3, lag: f32, a: Vec3) -> f32 {
+fn normal_speed<const TURNING: bool>(tc: &Touch, rel: Vec3, lag: f32, a: Vec3) -> f32 {
     let u = rel.dot(tc.normal);
-    if lag != 0.0 && tc.board_spin != Vec3::ZERO {
-        u + lag * surface_need(tc, rel + lag * a)
+    if TURNING && lag != 0.0 && tc.board_spin != Vec3::ZERO {
+        u + lagged_need(tc, rel, lag, a)
     } else {
         u
     }
+}
+
+/// [`surface_need`] at the velocity `lag` later, for a touch on a turning board (on a
+/// still one it is zero).
+#[inline]
+fn turning_need(tc: &Touch, rel: Vec3, lag: f32, a: Vec3) -> f32 {
+    surface_need(tc, rel + lag * a)
+}
+
+/// `lag` times [`surface_need`] at the velocity `lag` later: the turning board's part of
+/// [`normal_speed`].
+#[inline]
+fn lagged_need(tc: &Touch, rel: Vec3, lag: f32, a: Vec3) -> f32 {
+    lag * surface_need(tc, rel + lag * a)
 }
 
 /// Slip below this speed (m/s) is rolling.
@@ -830,7 +916,13 @@ const ROLLING_SLIP: f32 = 1e-5;
 /// the marble's state is behind the board's (the reported velocities of an integrator
 /// whose path leads them, [`lead_in`]); over that time a rolling marble's slip against a
 /// turning board's material changes at [`board_slip_rate`], so that is the slip it has.
-fn friction(s: &mut State, tc: &Touch, nf: f32, lag: f32, motion: &mut Motion) {
+fn friction<const TURNING: bool>(
+    s: &mut State,
+    tc: &Touch,
+    nf: f32,
+    lag: f32,
+    motion: &mut Motion,
+) {
     let n = tc.normal;
     let r = s.r;
     let rc = -r * n;
@@ -855,15 +947,16 @@ fn friction(s: &mut State, tc: &Touch, nf: f32, lag: f32, motion: &mut Motion) {
     // The slip's rate of change without friction: the contact point's acceleration, less
     // what the board's material under it does (`board_slip_rate`, zero on boards that do
     // not turn), tangential part.
+    let turning = TURNING && tc.board_spin != Vec3::ZERO;
     let a_c = {
         let mut raw = motion.a + (motion.alpha + alpha).cross(rc);
-        if tc.board_spin != Vec3::ZERO {
+        if turning {
             raw -= board_slip_rate(s, tc);
         }
         raw - raw.dot(n) * n
     };
     let mut slip = slip(s, tc);
-    if lag != 0.0 && tc.board_spin != Vec3::ZERO {
+    if turning && lag != 0.0 {
         let lagged = lag * board_slip_rate(s, tc);
         slip += lagged - lagged.dot(n) * n;
     }
