@@ -371,23 +371,46 @@ fn resolve_with<const SPINS: bool>(
     }
 
     // End of substep: resolve what still overlaps, or touches while approaching.
-    regather(p.h, &s, touches);
-    let held_throughout = settled_start && t >= p.h;
-    for tc in touches.as_slice() {
+    // A marble held on a turning board all substep ends with the drift of its held path
+    // (constant accelerations, while the board's normal and the Coriolis term turn): off
+    // the surface by up to about `h³` times their rates, with a normal speed of order `h²`
+    // times them. Both would make the next substep take it for leaving, and a drift past
+    // the touching tolerance would lose the touch; so the end looks `DRIFT` tolerances out
+    // for such a marble, and where the pull into the surface would bring it back before it
+    // rose past that (`u² ≤ 2 |a_n| tol`), it is not leaving: it is put back on the
+    // surface, its drift removed.
+    const DRIFT: f32 = 4.0;
+    let held_turning = settled_start && t >= p.h && turns(touches.as_slice());
+    let end_tol = if held_turning { DRIFT * tol } else { tol };
+    gather(
+        boards,
+        near,
+        p.h,
+        m.x0 + s.d,
+        m.r,
+        end_tol,
+        &m.material,
+        -s.v,
+        touches,
+    );
+    // Touches found only by the wider look that are not the held drift are no touches.
+    let mut beyond = [false; MAX_TOUCHES];
+    for (i, tc) in touches.as_slice().iter().enumerate() {
         let u = (s.v - tc.board_velocity).dot(tc.normal);
-        if tc.gap >= 0.0 && u >= 0.0 {
-            // A marble held on a turning board all substep ends with the drift of its
-            // held path (constant accelerations, while the board's normal and the
-            // Coriolis term turn): a normal speed of order `h²` times their rate, which
-            // the next substep would take for leaving. When the pull into the surface
-            // would bring it back before it rose beyond the touching tolerance
-            // (`u² ≤ 2 |a_n| tol`), it is not leaving: the drift is removed.
-            if held_throughout && u > 0.0 && tc.board_spin != Vec3::ZERO {
-                let pull = m.a.dot(tc.normal) - surface_need(tc, s.v - tc.board_velocity);
-                if pull < 0.0 && u * u <= -2.0 * pull * tol {
-                    s.v -= u * tc.normal;
-                }
+        if held_turning && tc.gap >= 0.0 && tc.board_spin != Vec3::ZERO {
+            let pull = m.a.dot(tc.normal) - surface_need(tc, s.v - tc.board_velocity);
+            if pull < 0.0 && u.abs() < p.threshold && u * u <= -2.0 * pull * end_tol {
+                // (`settle` below puts it onto the surface.)
+                s.v -= u * tc.normal;
+                record(contacts, boards, tc, ContactKind::Contact, u, p.h);
+                continue;
             }
+        }
+        if tc.gap > tol {
+            beyond[i] = true;
+            continue;
+        }
+        if tc.gap >= 0.0 && u >= 0.0 {
             record(contacts, boards, tc, ContactKind::Contact, u, p.h);
             continue;
         }
@@ -411,6 +434,9 @@ fn resolve_with<const SPINS: bool>(
             s.d -= tc.gap * tc.normal;
         }
         record(contacts, boards, tc, kind, if p.ccd { u } else { u0 }, p.h);
+    }
+    if held_turning {
+        touches.retain_indices(|i| !beyond[i]);
     }
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.

@@ -187,13 +187,12 @@ fn rising_board_carries_a_resting_marble() {
 }
 
 /// A marble resting on a tilting labyrinth board (0.2 rad/s about X, the marble 0.3 m
-/// from the axis, at rest relative to the board) slides off the rising side for 0.8 s at
+/// from the axis, at rest relative to the board) slides off the rising side for 1 s at
 /// dt = 1/60 along the closed form of `common::turning_board_exact` (smooth), for every
 /// integrator, with a contact every step and never a collision: Verlet and RK4 within
-/// 0.1 mm (the held path's drift on a turning board, `h³` times the turning rates, and
-/// f32 rounding), the first-order Euler schemes within twice their lead `dt/2` times the
-/// 0.6 m/s it gains. (Near 1 m/s at this step the held path drifts by about the touching
-/// tolerance in one substep: `docs/PHYSICS.md` §9.)
+/// 0.2 mm (second order at this step: measured 0.09 mm), the first-order Euler schemes
+/// within twice their lead `dt/2` times the 1 m/s it gains. (At 1 m/s the held path's
+/// drift over a substep is about the touching tolerance: `docs/PHYSICS.md` §9.)
 #[test]
 fn tilting_board_keeps_a_resting_marble_in_contact() {
     let (omega, q0, dt) = (0.2f32, 0.3f32, 1.0 / 60.0);
@@ -202,9 +201,9 @@ fn tilting_board_keeps_a_resting_marble_in_contact() {
         let mut sim = Simulation::from_scene(&scene).unwrap();
         let marble = sim.marbles()[0];
         let lead = integrator.velocity_lead(dt).abs();
-        let bar = if lead == 0.0 { 1e-4 } else { 2.0 * lead * 0.6 };
+        let bar = if lead == 0.0 { 2e-4 } else { 2.0 * lead * 1.0 };
         let mut worst = 0.0f32;
-        for step in 1..=48 {
+        for step in 1..=60 {
             sim.step();
             let (x, _, _) = turning_board_exact(false, Vec3::X, omega, q0, step as f32 * dt);
             worst = worst.max((sim.marble_state(0).0 - x).length());

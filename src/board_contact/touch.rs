@@ -132,6 +132,19 @@ impl TouchList {
         self.dropped == 0
     }
 
+    /// Keeps the touches whose index `keep` accepts, in order.
+    #[inline]
+    pub fn retain_indices(&mut self, mut keep: impl FnMut(usize) -> bool) {
+        let mut w = 0;
+        for r in 0..self.len {
+            if keep(r) {
+                self.items[w] = self.items[r];
+                w += 1;
+            }
+        }
+        self.len = w;
+    }
+
     /// Marks the list complete or not (for a list rebuilt from recorded contacts).
     #[inline]
     pub fn set_complete(&mut self, complete: bool) {
