@@ -772,27 +772,31 @@ fn rotation(field: &str, q: [f32; 4]) -> Result<(), SceneError> {
 }
 
 /// The fuzz harness of `fuzz/` (target `scene_file`) and of its corpus regression test:
-/// `data` as a RON scene file either is refused (not UTF-8, or a [`SceneError`]) or gives a
-/// scene that builds and steps 30 steps, after which every marble not quarantined has a
-/// finite position and velocity. Panics on a finding. Scenes that are valid but costly by
-/// design (more than 64 marbles or 16 boards, more than 16 substeps) are skipped after
-/// parsing, so that the fuzzer spends its time on inputs rather than on long runs.
+/// `data` as a scene file, RON and JSON both, is either refused (not UTF-8, or a
+/// [`SceneError`] with a message) or gives a scene that builds and steps 30 steps, after
+/// which every marble not quarantined has a finite position and velocity. Panics on a
+/// finding. Scenes that are valid but costly by design (more than 64 marbles or 16
+/// boards, more than 16 substeps) are skipped after parsing, so that the fuzzer spends its
+/// time on inputs rather than on long runs.
 #[doc(hidden)]
 pub fn fuzz_scene_file(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    let scene = match Scene::from_ron_str(text) {
-        Ok(scene) => scene,
-        Err(e) => {
-            assert!(!e.to_string().is_empty(), "an error without a message");
-            return;
+    for parsed in [Scene::from_ron_str(text), Scene::from_json_str(text)] {
+        match parsed {
+            Ok(scene) => fuzz_steps(&scene),
+            Err(e) => assert!(!e.to_string().is_empty(), "an error without a message"),
         }
-    };
+    }
+}
+
+/// The stepping half of [`fuzz_scene_file`].
+fn fuzz_steps(scene: &Scene) {
     if scene.marbles.len() > 64 || scene.boards.len() > 16 || scene.substeps > 16 {
         return;
     }
-    let Ok(mut sim) = crate::simulation::Simulation::from_scene(&scene) else {
+    let Ok(mut sim) = crate::simulation::Simulation::from_scene(scene) else {
         return;
     };
     for _ in 0..30 {

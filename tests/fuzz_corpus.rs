@@ -14,7 +14,7 @@ fn every_corpus_file_is_refused_or_steps() {
         .map(|entry| entry.unwrap().path())
         .collect();
     files.sort();
-    assert!(files.len() >= 7, "{} corpus files", files.len());
+    assert!(files.len() >= 9, "{} corpus files", files.len());
     for path in &files {
         let data = std::fs::read(path).unwrap();
         let run = std::panic::catch_unwind(|| bevy_marble::scene::fuzz_scene_file(&data));

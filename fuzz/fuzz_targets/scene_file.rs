@@ -1,4 +1,4 @@
-//! Any bytes as a RON scene file: parsing either refuses it with an error or gives a scene
+//! Any bytes as a scene file, RON and JSON: parsing either refuses it with an error or gives a scene
 //! that builds and steps (`bevy_marble::scene::fuzz_scene_file`, which the regression test
 //! `tests/fuzz_corpus.rs` runs on every file of the corpus). A panic, a hang (libFuzzer's
 //! `-timeout`) or an out-of-memory is a finding.
