@@ -246,6 +246,23 @@ fn resolve_with<const SPINS: bool>(
         );
     };
 
+    // An impact at `t` along the path: the touches there, their response, and the motion
+    // they leave.
+    let at_impact = |t: f32, s: &mut State, touches: &mut TouchList, contacts: &mut Contacts| {
+        regather(t, s, touches);
+        respond::<SPINS>(
+            touches.as_slice(),
+            s,
+            p.threshold,
+            boards,
+            t,
+            0.0,
+            m.a,
+            contacts,
+        );
+        settle::<SPINS>(touches.as_slice(), s, m.a, sep, false, 0.0)
+    };
+
     // From here on `s.v` is the path velocity (see `Integrator`), and `motion` the
     // accelerations left after the constraints and friction of the touches.
     let mut motion = match found {
@@ -277,18 +294,7 @@ fn resolve_with<const SPINS: bool>(
             advance::<SPINS>(&mut s, &free(m.a), tau);
             t = tau;
             impacts = 1;
-            regather(t, &s, touches);
-            respond::<SPINS>(
-                touches.as_slice(),
-                &mut s,
-                p.threshold,
-                boards,
-                t,
-                0.0,
-                m.a,
-                contacts,
-            );
-            settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0)
+            at_impact(t, &mut s, touches, contacts)
         }
         Found::Overlap => {
             s.v += offset(m.a);
@@ -318,18 +324,7 @@ fn resolve_with<const SPINS: bool>(
                 t += tau;
                 settled_start = false;
                 impacts += 1;
-                regather(t, &s, touches);
-                respond::<SPINS>(
-                    touches.as_slice(),
-                    &mut s,
-                    p.threshold,
-                    boards,
-                    t,
-                    0.0,
-                    m.a,
-                    contacts,
-                );
-                motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0);
+                motion = at_impact(t, &mut s, touches, contacts);
                 continue;
             }
         }
