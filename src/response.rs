@@ -61,10 +61,10 @@
 //!
 //! The forces are constant over each stretch between events, so the exact-parabola path
 //! and the spin `ω + α τ` stay exact there. On a turning board the slip also changes with
-//! the material under the contact ([`board_slip_rate`]), which static friction holds
+//! the material under the contact (`board_slip_rate`), which static friction holds
 //! against. For the Euler schemes, whose reported velocities lag or lead the path, the
-//! regime and the hold of each touch are decided on the path's state ([`lead_in`],
-//! [`normal_speed`]; `docs/PHYSICS.md` §5).
+//! regime and the hold of each touch are decided on the path's state (`lead_in`,
+//! `normal_speed`; `docs/PHYSICS.md` §5).
 //!
 //! The commonest case — a marble on one convex piece of a still board, not leaving it,
 //! with nothing else within reach of its substep — has this loop's result in closed form
