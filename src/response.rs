@@ -270,18 +270,17 @@ fn resolve_with<const SPINS: bool>(
             // The start's velocities are the integrator's reported ones, `lead` seconds
             // behind the path (see `lead_in`).
             let lead = p.integrator.velocity_lead(p.h);
-            let lag = lead;
             respond::<SPINS>(
                 touches.as_slice(),
                 &mut s,
                 p.threshold,
                 boards,
                 0.0,
-                lag,
+                lead,
                 m.a,
                 contacts,
             );
-            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, true, lag);
+            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, true, lead);
             if SPINS {
                 lead_in(touches.as_slice(), &mut s, m.a, sep, motion, lead)
             } else {
