@@ -11,6 +11,7 @@ pub mod output;
 pub mod pairs;
 #[cfg(feature = "bevy")]
 pub mod plugin;
+pub mod replay;
 pub mod response;
 pub mod scene;
 pub mod scenes;

@@ -69,9 +69,13 @@ struct RunArgs {
     /// Record every K-th step in the CSV (the first and last are always recorded).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     every: u64,
-    /// Write an SVG plot of the marbles' heights against time.
-    #[arg(long)]
+    /// Write pictures of the run as SVG: a top view with each marble's trail coloured by
+    /// speed, and energy and speed over time.
+    #[arg(long, value_name = "FILE.svg")]
     plot: Option<PathBuf>,
+    /// Write a replay page: one self-contained HTML file to open in any browser.
+    #[arg(long, value_name = "FILE.html")]
+    html: Option<PathBuf>,
     /// No progress bar or summary.
     #[arg(long)]
     quiet: bool,
@@ -187,15 +191,14 @@ fn load(path: &Path) -> Result<Scene, Failure> {
 fn run_file(args: &RunArgs) -> Result<(), Failure> {
     let scene = load(&args.scene)?;
     let steps = args.steps.unwrap_or_else(|| scene.default_steps());
-    simulate(
-        &scene,
-        &args.scene.display().to_string(),
-        steps,
-        args.csv.as_deref(),
-        args.every,
-        args.plot.as_deref(),
-        args.quiet,
-    )
+    let outputs = Outputs {
+        csv: args.csv.clone(),
+        every: args.every,
+        plot: args.plot.clone(),
+        html: args.html.clone(),
+        quiet: args.quiet,
+    };
+    simulate(&scene, &args.scene.display().to_string(), steps, &outputs)
 }
 
 fn run_default() -> Result<(), Failure> {
@@ -206,38 +209,38 @@ fn run_default() -> Result<(), Failure> {
     let scene_path = dir.join("default.ron");
     std::fs::write(&scene_path, scene.to_ron_string())
         .map_err(|e| other_error(format!("{}: {e}", scene_path.display())))?;
-    let csv = dir.join("default.csv");
-    let plot = dir.join("default.svg");
+    let outputs = Outputs {
+        csv: Some(dir.join("default.csv")),
+        every: 12,
+        plot: Some(dir.join("default.svg")),
+        html: Some(dir.join("default.html")),
+        quiet: false,
+    };
     simulate(
         &scene,
         "built-in default scene",
         scene.default_steps(),
-        Some(&csv),
-        12,
-        Some(&plot),
-        false,
+        &outputs,
     )?;
-    println!(
-        "outputs: {}, {}, {}",
-        scene_path.display(),
-        csv.display(),
-        plot.display()
-    );
+    println!("  scene            {}", scene_path.display());
     Ok(())
 }
 
-fn simulate(
-    scene: &Scene,
-    name: &str,
-    steps: u64,
-    csv: Option<&Path>,
+/// What a run writes.
+struct Outputs {
+    csv: Option<PathBuf>,
     every: u64,
-    plot: Option<&Path>,
+    plot: Option<PathBuf>,
+    html: Option<PathBuf>,
     quiet: bool,
-) -> Result<(), Failure> {
+}
+
+fn simulate(scene: &Scene, name: &str, steps: u64, out: &Outputs) -> Result<(), Failure> {
+    use bevy_marble::replay::{Recorder, ReplayOptions};
+    use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
     let mut sim = Simulation::from_scene(scene).map_err(|e| input_error(format!("{name}: {e}")))?;
     let io = |p: &Path, e: std::io::Error| other_error(format!("{}: {e}", p.display()));
-    let mut csv_file = match csv {
+    let mut csv_file = match out.csv.as_deref() {
         Some(p) => {
             let mut f = AtomicFile::create(p).map_err(|e| io(p, e))?;
             use std::io::Write;
@@ -247,54 +250,167 @@ fn simulate(
         }
         None => None,
     };
-    let mut heights = bevy_marble::output::HeightTrace::new(plot.is_some(), sim.marbles().len());
-    heights.record(&sim, 0.0);
-    let bar = if quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(steps)
+    // Every output file is opened before the run, so that a bad path fails at once.
+    let open = |p: &Option<PathBuf>| -> Result<Option<(PathBuf, AtomicFile)>, Failure> {
+        p.as_ref()
+            .map(|p| Ok((p.clone(), AtomicFile::create(p).map_err(|e| io(p, e))?)))
+            .transpose()
     };
-    let started = Instant::now();
+    let (plot_file, html_file) = (open(&out.plot)?, open(&out.html)?);
+    // The pictures, the page and the summary come from one recording of the run.
+    let recording = out.plot.is_some() || out.html.is_some() || !out.quiet;
+    let mut recorder = recording.then(|| Recorder::new(&mut sim, steps, ReplayOptions::default()));
+    // The bar appears once a run has taken a second, on stderr, and only on a terminal.
+    let bar = ProgressBar::with_draw_target(Some(steps), ProgressDrawTarget::hidden());
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40.cyan/blue} {percent:>3}%  {msg}  eta {eta}")
+            .expect("a valid template"),
+    );
+    let (started, mut stepping) = (Instant::now(), std::time::Duration::ZERO);
+    let mut shown = out.quiet;
     for step in 1..=steps {
+        let t = Instant::now();
         sim.step();
-        if step % every == 0 || step == steps {
-            if let Some((p, f)) = csv_file.as_mut() {
-                write_csv_rows(f.writer(), &sim, step, scene.dt).map_err(|e| io(p, e))?;
-            }
-            heights.record(&sim, (step as f64 * scene.dt as f64) as f32);
+        stepping += t.elapsed();
+        if (step.is_multiple_of(out.every) || step == steps)
+            && let Some((p, f)) = csv_file.as_mut()
+        {
+            write_csv_rows(f.writer(), &sim, step, scene.dt).map_err(|e| io(p, e))?;
+        }
+        if let Some(r) = recorder.as_mut() {
+            r.after_step(&sim, step);
         }
         if step % 64 == 0 {
+            if !shown && started.elapsed().as_secs_f32() > 1.0 {
+                bar.set_draw_target(ProgressDrawTarget::stderr());
+                shown = true;
+            }
+            bar.set_message(format!("{:.2} s simulated", step as f64 * scene.dt as f64));
             bar.set_position(step);
         }
     }
     bar.finish_and_clear();
-    let elapsed = started.elapsed();
+    let mut written = Vec::new();
     if let Some((p, f)) = csv_file {
         f.commit().map_err(|e| io(p, e))?;
+        written.push(p.to_path_buf());
     }
-    if let Some(p) = plot {
-        heights
-            .write_svg(p, name)
-            .map_err(|e| other_error(format!("{}: {e}", p.display())))?;
+    let Some(recorder) = recorder else {
+        return Ok(());
+    };
+    let rec = recorder.finish(name);
+    if let Some((p, mut f)) = plot_file {
+        use std::io::Write;
+        let svg = bevy_marble::output::plot_svg(&rec).map_err(|e| io(&p, e))?;
+        f.writer()
+            .write_all(svg.as_bytes())
+            .map_err(|e| io(&p, e))?;
+        f.commit().map_err(|e| io(&p, e))?;
+        written.push(p);
     }
-    if !quiet {
-        let n = sim.marbles().len().max(1) as f64;
-        let per = elapsed.as_secs_f64() * 1e9 / (n * steps.max(1) as f64);
-        let quarantined = sim.quarantined();
-        println!(
-            "{name}: {steps} steps of {} s ({} s simulated), {} marbles, {} boards, {:.3} s wall, {:.0} ns per marble-step{}",
-            scene.dt,
-            (steps as f64 * scene.dt as f64) as f32,
-            sim.marbles().len(),
-            sim.boards().len(),
-            elapsed.as_secs_f64(),
-            per,
-            if quarantined.is_empty() {
-                String::new()
-            } else {
-                format!(", quarantined (non-finite) marbles: {quarantined:?}")
-            }
+    if let Some((p, mut f)) = html_file {
+        rec.write_html(f.writer()).map_err(|e| io(&p, e))?;
+        f.commit().map_err(|e| io(&p, e))?;
+        written.push(p);
+    }
+    if !out.quiet {
+        print_summary(
+            scene,
+            &sim,
+            &rec,
+            steps,
+            started.elapsed(),
+            stepping,
+            &written,
         );
     }
     Ok(())
+}
+
+/// The table at the end of a run.
+fn print_summary(
+    scene: &Scene,
+    sim: &Simulation,
+    rec: &bevy_marble::replay::Recording,
+    steps: u64,
+    wall: std::time::Duration,
+    stepping: std::time::Duration,
+    written: &[PathBuf],
+) {
+    let n = sim.marbles().len();
+    let per = stepping.as_secs_f64() * 1e9 / (n.max(1) as f64 * steps.max(1) as f64);
+    let r = rec.radius_max.max(f32::MIN_POSITIVE);
+    let depth = |d: f32| format!("{:.3} mm ({:.1}% of r)", d * 1e3, 100.0 * d / r);
+    let quarantined = sim.quarantined();
+    let last = rec.frames() - 1;
+    println!("{}", rec.title);
+    let row = |k: &str, v: String| println!("  {k:<16} {v}");
+    row(
+        "simulated",
+        format!(
+            "{:.3} s: {steps} steps of {} s, {}",
+            steps as f64 * scene.dt as f64,
+            scene.dt,
+            match sim.world().resource::<StepConfig>().substeps {
+                1 => "one substep each".to_owned(),
+                k => format!("{k} substeps each"),
+            }
+        ),
+    );
+    row("marbles, boards", format!("{n}, {}", sim.boards().len()));
+    row(
+        "wall time",
+        format!(
+            "{:.3} s ({:.3} s stepping)",
+            wall.as_secs_f64(),
+            stepping.as_secs_f64()
+        ),
+    );
+    row("per marble-step", format!("{per:.0} ns"));
+    row(
+        "impacts",
+        format!(
+            "{} (hardest {:.3} m/s)",
+            rec.impact_count, rec.fastest_impact
+        ),
+    );
+    let pair = if scene.marble_collisions {
+        format!(", marble into marble {}", depth(rec.deepest_pair))
+    } else {
+        String::new()
+    };
+    row(
+        "deepest",
+        format!(
+            "marble into board {}{pair}, over {} frames",
+            depth(rec.deepest_board),
+            rec.frames()
+        ),
+    );
+    row(
+        "energy",
+        format!(
+            "{:.6} J at the start, {:.6} J at the end",
+            rec.energy[0], rec.energy[last]
+        ),
+    );
+    row(
+        "fastest at end",
+        format!(
+            "{:.4} m/s (mean {:.4} m/s)",
+            rec.speed_max[last], rec.speed_mean[last]
+        ),
+    );
+    row(
+        "quarantined",
+        if quarantined.is_empty() {
+            "none".to_owned()
+        } else {
+            format!("{} (marbles {quarantined:?})", quarantined.len())
+        },
+    );
+    row("asleep", format!("{}", sim.asleep()));
+    for (k, p) in written.iter().enumerate() {
+        row(if k == 0 { "written" } else { "" }, p.display().to_string());
+    }
 }

@@ -69,79 +69,310 @@ pub fn write_csv_rows(w: &mut impl Write, sim: &Simulation, step: u64, dt: f32) 
     Ok(())
 }
 
-/// Heights of the first [`HeightTrace::MAX_MARBLES`] marbles over time, for `--plot`.
-pub struct HeightTrace {
-    enabled: bool,
-    series: Vec<Vec<(f32, f32)>>,
+/// The speed colours of the plots and the replay page: blue (still) through teal and
+/// yellow to red (fast), `x` from 0 to 1.
+pub fn speed_colour(x: f32) -> [u8; 3] {
+    const STOPS: [(f32, [f32; 3]); 5] = [
+        (0.0, [59.0, 111.0, 182.0]),
+        (0.35, [43.0, 179.0, 163.0]),
+        (0.6, [231.0, 211.0, 74.0]),
+        (0.8, [240.0, 140.0, 46.0]),
+        (1.0, [232.0, 65.0, 60.0]),
+    ];
+    let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
+    for w in STOPS.windows(2) {
+        let ((x0, c0), (x1, c1)) = (w[0], w[1]);
+        if x <= x1 {
+            let s = (x - x0) / (x1 - x0);
+            return [0, 1, 2].map(|i| (c0[i] + s * (c1[i] - c0[i])).round() as u8);
+        }
+    }
+    [232, 65, 60]
 }
 
-impl HeightTrace {
-    /// Most marbles drawn.
-    pub const MAX_MARBLES: usize = 16;
+/// Most marbles whose trails the top view draws (every k-th beyond), and most points per
+/// trail: the file stays well under a megabyte.
+#[cfg(feature = "cli")]
+const TRAILS: usize = 300;
+#[cfg(feature = "cli")]
+const TRAIL_POINTS: usize = 240;
 
-    /// A trace for `marbles` marbles; records nothing unless `enabled`.
-    pub fn new(enabled: bool, marbles: usize) -> Self {
-        let n = if enabled {
-            marbles.min(Self::MAX_MARBLES)
-        } else {
-            0
-        };
-        HeightTrace {
-            enabled,
-            series: vec![Vec::new(); n],
-        }
-    }
-
-    /// Records the current heights at `time`.
-    pub fn record(&mut self, sim: &Simulation, time: f32) {
-        if !self.enabled {
-            return;
-        }
-        for (i, s) in self.series.iter_mut().enumerate() {
-            s.push((time, sim.marble_world_state(i).0.y));
-        }
-    }
-
-    /// Writes the plot as SVG (atomically).
-    #[cfg(feature = "cli")]
-    pub fn write_svg(&self, path: &Path, title: &str) -> io::Result<()> {
+/// The run's pictures as one SVG: a top view of the boards (as at the
+/// start) with each marble's trail coloured by its speed and its last position marked,
+/// and beside it the marbles' energy and their fastest and mean speed over time.
+#[cfg(feature = "cli")]
+pub fn plot_svg(rec: &crate::replay::Recording) -> io::Result<String> {
+    let mut svg = String::new();
+    {
         use plotters::prelude::*;
-        let (mut t1, mut y0, mut y1) = (0.0f32, f32::INFINITY, f32::NEG_INFINITY);
-        for &(t, y) in self.series.iter().flatten() {
-            t1 = t1.max(t);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-        if !y0.is_finite() || !y1.is_finite() {
-            (y0, y1) = (0.0, 1.0);
-        }
-        let pad = ((y1 - y0) * 0.05).max(1e-6);
-        let mut svg = String::new();
-        {
-            let root = SVGBackend::with_string(&mut svg, (900, 500)).into_drawing_area();
-            let draw = || -> Result<(), Box<dyn std::error::Error + '_>> {
-                root.fill(&WHITE)?;
-                let mut chart = ChartBuilder::on(&root)
-                    .caption(format!("{title}: marble heights"), ("sans-serif", 18))
-                    .margin(10)
-                    .x_label_area_size(40)
-                    .y_label_area_size(60)
-                    .build_cartesian_2d(0f32..t1.max(1e-6), (y0 - pad)..(y1 + pad))?;
-                chart
-                    .configure_mesh()
-                    .x_desc("time (s)")
-                    .y_desc("y (m)")
-                    .draw()?;
-                for (i, s) in self.series.iter().enumerate() {
-                    chart.draw_series(LineSeries::new(s.iter().copied(), &Palette99::pick(i)))?;
-                }
-                root.present()?;
-                Ok(())
+        let root = SVGBackend::with_string(&mut svg, (1400, 720)).into_drawing_area();
+        let draw = || -> Result<(), Box<dyn std::error::Error + '_>> {
+            root.fill(&WHITE)?;
+            let root = root.titled(&rec.title, ("sans-serif", 20))?;
+            let (left, right) = root.split_horizontally(700);
+            top_view(rec, &left)?;
+            let (upper, lower) = right.split_vertically(340);
+            let times: Vec<f32> = (0..rec.frames()).map(|f| rec.time(f)).collect();
+            let t1 = times.last().copied().unwrap_or(0.0).max(1e-6);
+            let line = |values: &[f64]| -> Vec<(f32, f64)> {
+                times.iter().copied().zip(values.iter().copied()).collect()
             };
-            draw().map_err(|e| io::Error::other(e.to_string()))?;
-        }
-        write_atomically(path, svg.as_bytes())
+            let energy = line(&rec.energy);
+            let kinetic = line(&rec.kinetic);
+            let (e0, e1) = span(energy.iter().chain(&kinetic).map(|p| p.1));
+            let mut chart = ChartBuilder::on(&upper)
+                .caption("energy of the marbles", ("sans-serif", 16))
+                .margin(12)
+                .x_label_area_size(36)
+                .y_label_area_size(70)
+                .build_cartesian_2d(0f32..t1, e0..e1)?;
+            chart
+                .configure_mesh()
+                .x_desc("time (s)")
+                .y_desc("energy (J)")
+                .draw()?;
+            chart
+                .draw_series(LineSeries::new(energy, BLUE.stroke_width(2)))?
+                .label("total (kinetic + potential)")
+                .legend(|(x, y)| PathElement::new([(x, y), (x + 18, y)], BLUE.stroke_width(2)));
+            let orange = RGBColor(240, 140, 46);
+            chart
+                .draw_series(LineSeries::new(kinetic, orange.stroke_width(2)))?
+                .label("kinetic")
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 18, y)], orange.stroke_width(2))
+                });
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK.mix(0.3))
+                .position(SeriesLabelPosition::UpperRight)
+                .draw()?;
+            let fastest: Vec<(f32, f64)> = times
+                .iter()
+                .copied()
+                .zip(rec.speed_max.iter().map(|&v| v as f64))
+                .collect();
+            let mean: Vec<(f32, f64)> = times
+                .iter()
+                .copied()
+                .zip(rec.speed_mean.iter().map(|&v| v as f64))
+                .collect();
+            let (_, v1) = span(fastest.iter().map(|p| p.1));
+            let mut chart = ChartBuilder::on(&lower)
+                .caption("speed of the marbles", ("sans-serif", 16))
+                .margin(12)
+                .x_label_area_size(36)
+                .y_label_area_size(70)
+                .build_cartesian_2d(0f32..t1, 0f64..v1.max(1e-6))?;
+            chart
+                .configure_mesh()
+                .x_desc("time (s)")
+                .y_desc("speed (m/s)")
+                .draw()?;
+            let red = RGBColor(232, 65, 60);
+            let teal = RGBColor(43, 150, 140);
+            chart
+                .draw_series(LineSeries::new(fastest, red.stroke_width(2)))?
+                .label("fastest")
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], red.stroke_width(2)));
+            chart
+                .draw_series(LineSeries::new(mean, teal.stroke_width(2)))?
+                .label("mean")
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 18, y)], teal.stroke_width(2))
+                });
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK.mix(0.3))
+                .position(SeriesLabelPosition::UpperRight)
+                .draw()?;
+            root.present()?;
+            Ok(())
+        };
+        draw().map_err(|e| io::Error::other(e.to_string()))?;
     }
+    Ok(svg)
+}
+
+/// The least and greatest finite value, padded by 5% (a flat series gets a unit span).
+#[cfg(feature = "cli")]
+fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if lo > hi {
+        return (0.0, 1.0);
+    }
+    let pad = if hi > lo {
+        0.05 * (hi - lo)
+    } else {
+        0.5 * hi.abs().max(1e-9)
+    };
+    (lo - pad, hi + pad)
+}
+
+/// The top view: looking down −Y, x to the right and z down the page, one metre the same
+/// length both ways.
+#[cfg(feature = "cli")]
+fn top_view<DB: plotters::prelude::DrawingBackend>(
+    rec: &crate::replay::Recording,
+    area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    use plotters::prelude::*;
+    let (area, legend) = area.split_vertically(area.dim_in_pixel().1 - 56);
+    // Bounds: the bounded boards' lines at the start and every marble's path.
+    let (mut lo, mut hi) = (
+        glam::Vec2::splat(f32::INFINITY),
+        glam::Vec2::splat(f32::NEG_INFINITY),
+    );
+    let mut add = |p: glam::Vec3| {
+        if p.is_finite() {
+            lo = lo.min(glam::Vec2::new(p.x, p.z));
+            hi = hi.max(glam::Vec2::new(p.x, p.z));
+        }
+    };
+    let lines: Vec<[glam::Vec3; 2]> = rec
+        .boards
+        .iter()
+        .filter_map(|b| b.poses.first().map(|pose| (b, pose)))
+        .flat_map(|(b, &(p, q))| b.segments.iter().map(move |s| s.map(|x| p + q * x)))
+        .collect();
+    lines.iter().flatten().for_each(|&p| add(p));
+    for f in 0..rec.frames() {
+        rec.positions(f).iter().for_each(|&p| add(p));
+    }
+    if lo.x.is_nan() || lo.x > hi.x {
+        (lo, hi) = (glam::Vec2::splat(-0.5), glam::Vec2::splat(0.5));
+    }
+    let (w, h) = area.dim_in_pixel();
+    let (w, h) = (w as f32 - 90.0, h as f32 - 70.0);
+    let half = 0.5 * ((hi - lo) * 1.04).max(glam::Vec2::splat(1e-3));
+    let mid = 0.5 * (lo + hi);
+    // One metre the same length on both axes: widen the narrower span.
+    let scale = (w / (2.0 * half.x)).min(h / (2.0 * half.y));
+    let half = glam::Vec2::new(w, h) / (2.0 * scale);
+    let mut chart = ChartBuilder::on(&area)
+        .caption("top view: trails coloured by speed", ("sans-serif", 16))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(60)
+        .build_cartesian_2d(
+            (mid.x - half.x)..(mid.x + half.x),
+            (mid.y + half.y)..(mid.y - half.y),
+        )?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("x (m)")
+        .y_desc("z (m)")
+        .draw()?;
+    let grey = RGBColor(120, 128, 140);
+    chart.draw_series(
+        lines
+            .iter()
+            .map(|[a, b]| PathElement::new([(a.x, a.z), (b.x, b.z)], grey.stroke_width(1))),
+    )?;
+    // The colour scale: the 98th percentile of the recorded speeds.
+    let mut speeds: Vec<f32> = (0..rec.frames())
+        .flat_map(|f| rec.velocities(f).iter().map(|v| v.length()))
+        .filter(|s| s.is_finite())
+        .collect();
+    let vmax = if speeds.is_empty() {
+        0.01
+    } else {
+        let k = (0.98 * (speeds.len() - 1) as f32) as usize;
+        *speeds.select_nth_unstable_by(k, f32::total_cmp).1
+    }
+    .max(0.01);
+    let colour = |s: f32| {
+        let [r, g, b] = speed_colour(s / vmax);
+        RGBColor(r, g, b)
+    };
+    let n = rec.radii.len();
+    let every = n.div_ceil(TRAILS).max(1);
+    let frame_step = rec.frames().div_ceil(TRAIL_POINTS).max(1);
+    let mut frames: Vec<usize> = (0..rec.frames()).step_by(frame_step).collect();
+    if frames.last() != Some(&(rec.frames() - 1)) {
+        frames.push(rec.frames() - 1);
+    }
+    for i in (0..n).step_by(every) {
+        // Runs of segments in one of 16 colour bands, each one path.
+        let mut run: Vec<(f32, f32)> = Vec::new();
+        let mut band = usize::MAX;
+        for w in frames.windows(2) {
+            let (a, b) = (rec.positions(w[0])[i], rec.positions(w[1])[i]);
+            if !(a.is_finite() && b.is_finite()) {
+                continue;
+            }
+            let s = 0.5 * (rec.velocities(w[0])[i].length() + rec.velocities(w[1])[i].length());
+            let k = ((s / vmax).clamp(0.0, 1.0) * 15.0).round() as usize;
+            if k != band || run.is_empty() {
+                if run.len() > 1 {
+                    chart.draw_series(std::iter::once(PathElement::new(
+                        std::mem::take(&mut run),
+                        colour(band as f32 / 15.0 * vmax).stroke_width(2),
+                    )))?;
+                }
+                run.clear();
+                run.push((a.x, a.z));
+                band = k;
+            }
+            run.push((b.x, b.z));
+        }
+        if run.len() > 1 {
+            chart.draw_series(std::iter::once(PathElement::new(
+                run,
+                colour(band as f32 / 15.0 * vmax).stroke_width(2),
+            )))?;
+        }
+    }
+    if let Some(last) = rec.frames().checked_sub(1) {
+        chart.draw_series(
+            (0..n)
+                .filter(|&i| rec.positions(last)[i].is_finite())
+                .map(|i| {
+                    let p = rec.positions(last)[i];
+                    let px = (rec.radii[i] * scale).max(2.0) as i32;
+                    Circle::new((p.x, p.z), px, BLACK.mix(0.75).stroke_width(1))
+                }),
+        )?;
+    }
+    // The legend: a colour bar from 0 to vmax.
+    let (lw, _) = legend.dim_in_pixel();
+    let (x0, x1) = (80i32, lw as i32 - 40);
+    for k in 0..100 {
+        let xa = x0 + (x1 - x0) * k / 100;
+        let xb = x0 + (x1 - x0) * (k + 1) / 100;
+        let [r, g, b] = speed_colour(k as f32 / 99.0);
+        legend.draw(&Rectangle::new(
+            [(xa, 8), (xb, 22)],
+            RGBColor(r, g, b).filled(),
+        ))?;
+    }
+    let text = ("sans-serif", 13).into_font().color(&BLACK);
+    legend.draw(&Text::new("0", (x0 - 4, 28), text.clone()))?;
+    legend.draw(&Text::new(
+        format!("{vmax:.3} m/s and faster"),
+        (x1 - 120, 28),
+        text.clone(),
+    ))?;
+    legend.draw(&Text::new(
+        format!(
+            "speed; {} of {} marbles' trails; circles: where they are at the end",
+            n.div_ceil(every),
+            rec.marbles
+        ),
+        (x0, 44),
+        text,
+    ))?;
+    Ok(())
 }
 
 /// Writes `bytes` to `path` through an [`AtomicFile`].
