@@ -147,8 +147,8 @@ pub struct Board;
 /// untouched. A marble enters it when its centre moves inside the volume and exits when
 /// its centre leaves; the step reports both ([`crate::events`]). Goals, holes and
 /// fall-out zones are sensors. A sensor's pose comes from its [`Position`] and
-/// [`Rotation`], or, when spawned without them, from its `Transform`; it moves only when
-/// the program moves it.
+/// [`Rotation`], or, when spawned without them, from its `Transform`; it moves when the
+/// program moves it, or with the board it is [`CarriedBy`].
 ///
 /// A point is inside a cuboid, a bowl's sphere below its rim, a half-space (below its
 /// plane), a height field (below its surface) or a closed triangle mesh (enclosed by it);
@@ -158,6 +158,21 @@ pub struct Board;
 #[component(on_add = resolve_unset_pose)]
 #[require(Position = Position::UNSET, Rotation = Rotation::UNSET)]
 pub struct Sensor;
+
+/// A sensor carried by a board: at the end of every step, before marbles are checked
+/// against it, the sensor's [`Position`] and [`Rotation`] become the board's pose composed
+/// with this pose in the board's frame. The holes and the goal of a tilting labyrinth tilt
+/// with it.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
+pub struct CarriedBy {
+    /// The board.
+    pub board: Entity,
+    /// The sensor's position in the board's frame, m.
+    pub position: Vec3,
+    /// The sensor's orientation in the board's frame.
+    pub rotation: Quat,
+}
 
 /// Drives a board to a pose over the next physics step: during the step the board moves
 /// with the constant linear and angular velocity (about its [`Position`]) that bring it
@@ -564,6 +579,7 @@ pub(crate) fn register_types(app: &mut bevy_app::App) {
         .register_type::<Marble>()
         .register_type::<Board>()
         .register_type::<Sensor>()
+        .register_type::<CarriedBy>()
         .register_type::<NextPose>()
         .register_type::<Radius>()
         .register_type::<Mass>()

@@ -76,6 +76,11 @@ struct RunArgs {
     /// Write a replay page: one self-contained HTML file to open in any browser.
     #[arg(long, value_name = "FILE.html")]
     html: Option<PathBuf>,
+    /// Drive boards through these poses (CSV `step,board,x,y,z,qx,qy,qz,qw`: where board
+    /// `board` is at the end of step `step`), as a game does with `NextPose`; the tilts a
+    /// player gave, replayed.
+    #[arg(long, value_name = "FILE.csv")]
+    poses: Option<PathBuf>,
     /// No progress bar or summary.
     #[arg(long)]
     quiet: bool,
@@ -114,8 +119,12 @@ fn main() -> ExitCode {
         None => run_default(),
         Some(Command::Run(args)) => run_file(&args),
         Some(Command::Check { scene }) => load(&scene).map(|s| {
+            let sensors = match s.sensors.len() {
+                0 => String::new(),
+                n => format!(", {n} sensors"),
+            };
             println!(
-                "{}: ok ({} boards, {} marbles)",
+                "{}: ok ({} boards, {} marbles{sensors})",
                 scene.display(),
                 s.boards.len(),
                 s.marbles.len()
@@ -191,7 +200,17 @@ fn load(path: &Path) -> Result<Scene, Failure> {
 fn run_file(args: &RunArgs) -> Result<(), Failure> {
     let scene = load(&args.scene)?;
     let steps = args.steps.unwrap_or_else(|| scene.default_steps());
+    let poses = match &args.poses {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| input_error(format!("{}: {e}", p.display())))?;
+            bevy_marble::output::parse_poses(&text, scene.boards.len())
+                .map_err(|e| input_error(format!("{}: {e}", p.display())))?
+        }
+        None => Vec::new(),
+    };
     let outputs = Outputs {
+        poses,
         csv: args.csv.clone(),
         every: args.every,
         plot: args.plot.clone(),
@@ -210,6 +229,7 @@ fn run_default() -> Result<(), Failure> {
     std::fs::write(&scene_path, scene.to_ron_string())
         .map_err(|e| other_error(format!("{}: {e}", scene_path.display())))?;
     let outputs = Outputs {
+        poses: Vec::new(),
         csv: Some(dir.join("default.csv")),
         every: 12,
         plot: Some(dir.join("default.svg")),
@@ -226,8 +246,9 @@ fn run_default() -> Result<(), Failure> {
     Ok(())
 }
 
-/// What a run writes.
+/// What a run reads besides the scene, and what it writes.
 struct Outputs {
+    poses: Vec<bevy_marble::output::PoseRow>,
     csv: Option<PathBuf>,
     every: u64,
     plot: Option<PathBuf>,
@@ -268,7 +289,15 @@ fn simulate(scene: &Scene, name: &str, steps: u64, out: &Outputs) -> Result<(), 
     );
     let (started, mut stepping) = (Instant::now(), std::time::Duration::ZERO);
     let mut shown = out.quiet;
+    let mut poses = out.poses.iter().peekable();
     for step in 1..=steps {
+        while let Some(row) = poses.next_if(|r| r.step == step) {
+            let board = sim.boards()[row.board];
+            sim.world_mut().entity_mut(board).insert(NextPose {
+                position: row.position,
+                rotation: row.rotation,
+            });
+        }
         let t = Instant::now();
         sim.step();
         stepping += t.elapsed();
@@ -410,6 +439,27 @@ fn print_summary(
         },
     );
     row("asleep", format!("{}", sim.asleep()));
+    if !rec.sensor_entries.is_empty() {
+        // Entries summed by sensor name, in the order the names first appear.
+        let mut by_name: Vec<(&str, u64, usize)> = Vec::new();
+        for (name, n) in &rec.sensor_entries {
+            match by_name.iter_mut().find(|(m, _, _)| m == name) {
+                Some(entry) => {
+                    entry.1 += n;
+                    entry.2 += 1;
+                }
+                None => by_name.push((name, *n, 1)),
+            }
+        }
+        let text: Vec<String> = by_name
+            .iter()
+            .map(|(name, n, count)| {
+                let name = if name.is_empty() { "unnamed" } else { name };
+                format!("{name} ({count}) {n}")
+            })
+            .collect();
+        row("sensors entered", text.join(", "));
+    }
     for (k, p) in written.iter().enumerate() {
         row(if k == 0 { "written" } else { "" }, p.display().to_string());
     }

@@ -69,6 +69,125 @@ pub fn write_csv_rows(w: &mut impl Write, sim: &Simulation, step: u64, dt: f32) 
     Ok(())
 }
 
+/// The header of a board-pose file (`marble run --poses`): for each row, the pose board
+/// `board` (its index in the scene) reaches at the end of step `step` (1 for the first
+/// step), as a [`NextPose`](crate::components::NextPose).
+pub const POSES_HEADER: &str = "step,board,x,y,z,qx,qy,qz,qw";
+
+/// One row of a board-pose file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseRow {
+    /// The step at whose end the board is there (≥ 1).
+    pub step: u64,
+    /// The board's index in the scene.
+    pub board: usize,
+    /// Its position, m.
+    pub position: glam::Vec3,
+    /// Its orientation (a unit quaternion).
+    pub rotation: glam::Quat,
+}
+
+/// Writes one board-pose row (numbers that parse back to the same f32).
+pub fn write_pose_row(w: &mut impl Write, row: &PoseRow) -> io::Result<()> {
+    let (p, q) = (row.position, row.rotation);
+    writeln!(
+        w,
+        "{},{},{},{},{},{},{},{},{}",
+        row.step, row.board, p.x, p.y, p.z, q.x, q.y, q.z, q.w
+    )
+}
+
+/// Reads a board-pose file for a scene of `boards` boards: the header, then rows in order
+/// of step, at most one per board and step. An error names the line, the field and the
+/// value.
+pub fn parse_poses(text: &str, boards: usize) -> Result<Vec<PoseRow>, String> {
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, h)) if h.trim() == POSES_HEADER => {}
+        other => {
+            return Err(format!(
+                "line 1: the header must be {POSES_HEADER:?}, got {:?}",
+                other.map_or("", |(_, h)| h)
+            ));
+        }
+    }
+    let mut rows: Vec<PoseRow> = Vec::new();
+    for (i, line) in lines {
+        let n = i + 1;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != 9 {
+            return Err(format!(
+                "line {n}: 9 fields ({POSES_HEADER}), got {}",
+                fields.len()
+            ));
+        }
+        let names = ["step", "board", "x", "y", "z", "qx", "qy", "qz", "qw"];
+        let step: u64 = fields[0].parse().ok().filter(|&s| s >= 1).ok_or_else(|| {
+            format!(
+                "line {n}: step must be a whole number >= 1, got {:?}",
+                fields[0]
+            )
+        })?;
+        let board: usize = fields[1]
+            .parse()
+            .ok()
+            .filter(|&b| b < boards)
+            .ok_or_else(|| {
+                format!(
+                    "line {n}: board must be the index of one of the {boards} boards, got {:?}",
+                    fields[1]
+                )
+            })?;
+        let mut v = [0f32; 7];
+        for k in 0..7 {
+            let x: f32 = fields[2 + k]
+                .parse()
+                .ok()
+                .filter(|x: &f32| x.is_finite())
+                .ok_or_else(|| {
+                    format!(
+                        "line {n}: {} must be a finite number, got {:?}",
+                        names[2 + k],
+                        fields[2 + k]
+                    )
+                })?;
+            if k < 3 && x.abs() > crate::validate::MAX_COORDINATE {
+                return Err(format!(
+                    "line {n}: {} must be within {:e} m of the origin, got {x}",
+                    names[2 + k],
+                    crate::validate::MAX_COORDINATE
+                ));
+            }
+            v[k] = x;
+        }
+        let rotation = glam::Quat::from_xyzw(v[3], v[4], v[5], v[6]);
+        let length = rotation.length();
+        if (length - 1.0).abs() > 1e-3 {
+            return Err(format!(
+                "line {n}: qx, qy, qz, qw must be a unit quaternion (length within 1e-3 of 1), got length {length}"
+            ));
+        }
+        if let Some(last) = rows.last()
+            && (step < last.step || (step == last.step && board <= last.board))
+        {
+            return Err(format!(
+                "line {n}: rows must be in order of step, then board, one per board and step; got step {step} board {board} after step {} board {}",
+                last.step, last.board
+            ));
+        }
+        rows.push(PoseRow {
+            step,
+            board,
+            position: glam::Vec3::new(v[0], v[1], v[2]),
+            rotation,
+        });
+    }
+    Ok(rows)
+}
+
 /// The speed colours of the plots and the replay page: blue (still) through teal and
 /// yellow to red (fast), `x` from 0 to 1.
 pub fn speed_colour(x: f32) -> [u8; 3] {

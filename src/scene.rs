@@ -98,6 +98,10 @@ pub struct Scene {
     pub boards: Vec<BoardDesc>,
     /// Marbles.
     pub marbles: Vec<MarbleDesc>,
+    /// Sensor volumes (goals, holes): they report marbles entering and leaving and never
+    /// touch them ([`crate::events`]). An extension of the contract.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<SensorDesc>,
 }
 
 impl Default for Scene {
@@ -120,6 +124,7 @@ impl Default for Scene {
             duration: 10.0,
             boards: Vec::new(),
             marbles: Vec::new(),
+            sensors: Vec::new(),
         }
     }
 }
@@ -154,6 +159,28 @@ pub struct BoardDesc {
     /// Spin damping about the contact normal, ≥ 0 (used when rolling is on).
     #[serde(default)]
     pub spin_damping: f32,
+}
+
+/// A sensor volume: a [`Sensor`](crate::components::Sensor) entity named `name`, fixed in
+/// the world or carried by a board ([`CarriedBy`](crate::components::CarriedBy)).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorDesc {
+    /// What the game calls it (a `Name`): `"goal"`, `"hole"`, …
+    #[serde(default)]
+    pub name: String,
+    /// Its volume (any board shape).
+    pub shape: ShapeDesc,
+    /// The index of the board that carries it, if any; its pose is then in that board's
+    /// frame and it moves with the board.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub board: Option<usize>,
+    /// Position, m: world frame, or the board's frame when `board` is given.
+    #[serde(default)]
+    pub position: [f32; 3],
+    /// Orientation `[x, y, z, w]`, normalized on load (world or board frame, as above).
+    #[serde(default = "identity_rotation")]
+    pub rotation: [f32; 4],
 }
 
 /// A marble.
@@ -447,6 +474,21 @@ impl Scene {
             non_negative(f("friction"), m.friction)?;
             non_negative(f("rolling_resistance"), m.rolling_resistance)?;
             non_negative(f("spin_damping"), m.spin_damping)?;
+        }
+        for (i, s) in self.sensors.iter().enumerate() {
+            let f = |name: &str| format!("sensors[{i}].{name}");
+            validate_shape(&f("shape"), &s.shape, true)?;
+            in_range(&f("position"), s.position, MAX_COORDINATE, POSITION_RANGE)?;
+            rotation(&f("rotation"), s.rotation)?;
+            if let Some(b) = s.board
+                && b >= self.boards.len()
+            {
+                return invalid(
+                    &f("board"),
+                    &format!("the index of one of the {} boards", self.boards.len()),
+                    b,
+                );
+            }
         }
         Ok(())
     }

@@ -162,7 +162,9 @@ pub fn substep_schedule() -> Schedule {
         forces::clear_forces.in_set(MarbleSystems::Finish),
         (
             events::finish_touches.run_if(events::events_on),
-            events::update_sensors.run_if(events::any_sensor),
+            (events::carry_sensors, events::update_sensors)
+                .chain()
+                .run_if(events::any_sensor),
         )
             .chain()
             .in_set(MarbleSystems::Report),

@@ -4,8 +4,8 @@ use bevy_ecs::prelude::*;
 use glam::{Quat, Vec3};
 
 use crate::components::{
-    AngularVelocity, Board, Collider, Friction, Marble, Mass, Position, Quarantined, Radius,
-    Restitution, RollingResistance, Rotation, SpinDamping, Velocity,
+    AngularVelocity, Board, CarriedBy, Collider, Friction, Marble, Mass, Position, Quarantined,
+    Radius, Restitution, RollingResistance, Rotation, Sensor, SpinDamping, Velocity,
 };
 use crate::config::GravityTilt;
 use crate::scene::{Scene, SceneError, quat};
@@ -34,7 +34,128 @@ pub struct Simulation {
     schedule: Schedule,
     marbles: Vec<Entity>,
     boards: Vec<Entity>,
+    sensors: Vec<Entity>,
     steps: u64,
+}
+
+/// The entities [`spawn_scene`] made, each list in the scene's order.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SceneEntities {
+    /// One per board.
+    pub boards: Vec<Entity>,
+    /// One per marble.
+    pub marbles: Vec<Entity>,
+    /// One per sensor, with a `Name` from the scene.
+    pub sensors: Vec<Entity>,
+}
+
+/// Spawns a validated scene's boards, marbles and sensors into `world`, in that order and
+/// each in the scene's order, with the components a [`Simulation`] gives them; under
+/// `tilt_as_gravity` it also inserts the [`GravityTilt`] resource. The step settings are
+/// left to the caller ([`Scene::step_config`] as a resource). A Bevy game spawns its level
+/// this way, adds its own components (meshes, `Transform`s), and steps the same physics as
+/// `marble run` does on the same file.
+pub fn spawn_scene(scene: &Scene, world: &mut World) -> SceneEntities {
+    // Neverball's model: the turning board stands still and gravity turns instead.
+    let tilt = scene
+        .boards
+        .iter()
+        .find(|b| scene.tilt_as_gravity && b.angular_velocity != [0.0; 3])
+        .map(|b| GravityTilt {
+            angular_velocity: Vec3::from_array(b.angular_velocity),
+            pivot: Vec3::from_array(b.position),
+            rotation: Quat::IDENTITY,
+        });
+    if let Some(tilt) = tilt {
+        world.insert_resource(tilt);
+    }
+    let boards: Vec<Entity> = scene
+        .boards
+        .iter()
+        .map(|b| {
+            world
+                .spawn((
+                    Board,
+                    Collider::new(b.shape.build()),
+                    Position(Vec3::from_array(b.position)),
+                    Rotation(quat(b.rotation)),
+                    Velocity(Vec3::from_array(b.velocity)),
+                    AngularVelocity(if tilt.is_some() {
+                        Vec3::ZERO
+                    } else {
+                        Vec3::from_array(b.angular_velocity)
+                    }),
+                    Restitution(b.restitution),
+                    Friction(b.friction),
+                    RollingResistance(b.rolling_resistance),
+                    SpinDamping(b.spin_damping),
+                ))
+                .id()
+        })
+        .collect();
+    let marbles = scene
+        .marbles
+        .iter()
+        .map(|m| {
+            let mut marble = world.spawn((
+                Marble,
+                Position(Vec3::from_array(m.position)),
+                Velocity(Vec3::from_array(m.velocity)),
+                Radius(m.radius),
+                m.mass.map_or_else(|| Mass::glass(m.radius), Mass::new),
+                Restitution(m.restitution),
+                Friction(m.friction),
+            ));
+            // Spin exists only when the scene asks for rolling.
+            if scene.rolling {
+                marble.insert((
+                    AngularVelocity(Vec3::from_array(m.angular_velocity)),
+                    Rotation::default(),
+                    RollingResistance(m.rolling_resistance),
+                    SpinDamping(m.spin_damping),
+                ));
+            }
+            marble.id()
+        })
+        .collect();
+    let sensors = scene
+        .sensors
+        .iter()
+        .map(|s| {
+            let (p, q) = (Vec3::from_array(s.position), quat(s.rotation));
+            // Carried by a board: placed at the board's pose now, and at every step's end.
+            let (pose, carried) = match s.board {
+                Some(b) => {
+                    let board = boards[b];
+                    let bp = world.get::<Position>(board).expect("a board").0;
+                    let bq = world.get::<Rotation>(board).expect("a board").0;
+                    let carried = CarriedBy {
+                        board,
+                        position: p,
+                        rotation: q,
+                    };
+                    ((bp + bq * p, bq * q), Some(carried))
+                }
+                None => ((p, q), None),
+            };
+            let mut sensor = world.spawn((
+                Sensor,
+                Collider::new(s.shape.build()),
+                Position(pose.0),
+                Rotation(pose.1),
+                bevy_ecs::name::Name::new(s.name.clone()),
+            ));
+            if let Some(carried) = carried {
+                sensor.insert(carried);
+            }
+            sensor.id()
+        })
+        .collect();
+    SceneEntities {
+        boards,
+        marbles,
+        sensors,
+    }
 }
 
 impl Simulation {
@@ -45,68 +166,11 @@ impl Simulation {
         let mut world = World::new();
         world.insert_resource(scene.step_config());
         init_resources(&mut world);
-        // Neverball's model: the turning board stands still and gravity turns instead.
-        let tilt = scene
-            .boards
-            .iter()
-            .find(|b| scene.tilt_as_gravity && b.angular_velocity != [0.0; 3])
-            .map(|b| GravityTilt {
-                angular_velocity: Vec3::from_array(b.angular_velocity),
-                pivot: Vec3::from_array(b.position),
-                rotation: Quat::IDENTITY,
-            });
-        if let Some(tilt) = tilt {
-            world.insert_resource(tilt);
-        }
-        let boards = scene
-            .boards
-            .iter()
-            .map(|b| {
-                world
-                    .spawn((
-                        Board,
-                        Collider::new(b.shape.build()),
-                        Position(Vec3::from_array(b.position)),
-                        Rotation(quat(b.rotation)),
-                        Velocity(Vec3::from_array(b.velocity)),
-                        AngularVelocity(if tilt.is_some() {
-                            Vec3::ZERO
-                        } else {
-                            Vec3::from_array(b.angular_velocity)
-                        }),
-                        Restitution(b.restitution),
-                        Friction(b.friction),
-                        RollingResistance(b.rolling_resistance),
-                        SpinDamping(b.spin_damping),
-                    ))
-                    .id()
-            })
-            .collect();
-        let marbles = scene
-            .marbles
-            .iter()
-            .map(|m| {
-                let mut marble = world.spawn((
-                    Marble,
-                    Position(Vec3::from_array(m.position)),
-                    Velocity(Vec3::from_array(m.velocity)),
-                    Radius(m.radius),
-                    m.mass.map_or_else(|| Mass::glass(m.radius), Mass::new),
-                    Restitution(m.restitution),
-                    Friction(m.friction),
-                ));
-                // Spin exists only when the scene asks for rolling.
-                if scene.rolling {
-                    marble.insert((
-                        AngularVelocity(Vec3::from_array(m.angular_velocity)),
-                        Rotation::default(),
-                        RollingResistance(m.rolling_resistance),
-                        SpinDamping(m.spin_damping),
-                    ));
-                }
-                marble.id()
-            })
-            .collect();
+        let SceneEntities {
+            boards,
+            marbles,
+            sensors,
+        } = spawn_scene(scene, &mut world);
         let mut schedule = substep_schedule();
         schedule
             .initialize(&mut world)
@@ -116,6 +180,7 @@ impl Simulation {
             schedule,
             marbles,
             boards,
+            sensors,
             steps: 0,
         })
     }
@@ -147,6 +212,11 @@ impl Simulation {
     /// The boards of the scene, in its order.
     pub fn boards(&self) -> &[Entity] {
         &self.boards
+    }
+
+    /// The sensors of the scene, in its order.
+    pub fn sensors(&self) -> &[Entity] {
+        &self.sensors
     }
 
     /// Steps taken so far.

@@ -8,7 +8,8 @@ use parry3d::bounding_volume::Aabb;
 
 use super::Stepped;
 use crate::components::{
-    Collider, ContactKind, Contacts, Marble, Position, Quarantined, Radius, Rotation, Sensor,
+    Board, CarriedBy, Collider, ContactKind, Contacts, Marble, Position, Quarantined, Radius,
+    Rotation, Sensor,
 };
 use crate::config::{StepConfig, Substep};
 use crate::events::{
@@ -169,11 +170,30 @@ pub fn finish_touches(
     state.touching.clear();
 }
 
+/// Places each sensor [`CarriedBy`] a board at the board's pose composed with its own.
+pub fn carry_sensors(
+    mut sensors: Query<(&CarriedBy, &mut Position, &mut Rotation), (With<Sensor>, Without<Board>)>,
+    boards: Query<(&Position, &Rotation), With<Board>>,
+) {
+    for (carried, mut position, mut rotation) in &mut sensors {
+        if let Ok((p, q)) = boards.get(carried.board) {
+            let (p, q) = (p.0 + q.0 * carried.position, q.0 * carried.rotation);
+            // Written only when it changes: a still board's sensors stay unchanged.
+            if position.0 != p {
+                position.0 = p;
+            }
+            if rotation.0 != q {
+                rotation.0 = q;
+            }
+        }
+    }
+}
+
 /// Last substep (and with sensors only): which marbles' centres are inside which sensors,
 /// against the last step; a marble whose centre passed through a sensor since the last
 /// step, neither end inside, enters and leaves it in this step. The sensors are found
 /// through a grid over their bounds, so a marble costs one cell lookup however many
-/// sensors there are.
+/// sensors there are. Runs after `carry_sensors`.
 #[expect(
     clippy::type_complexity,
     reason = "a query of sensors and one of marbles"

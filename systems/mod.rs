@@ -19,7 +19,7 @@
 //! | `MoveBoards` | `boards.rs` | kinematic boards advance by their velocities; on the last substep, driven boards reach their `NextPose` |
 //! | `FallAsleep` | `sleep.rs` | on the last substep, with sleeping on: put to sleep the groups that have been slow long enough |
 //! | `Finish` | `forces.rs` | on the last substep: clear forces |
-//! | `Report` | `events.rs` | on the last substep: contacts started and ended, sensors entered and left |
+//! | `Report` | `events.rs` | on the last substep: contacts started and ended; sensors carried by boards placed, then sensors entered and left |
 
 use bevy_ecs::prelude::*;
 use bevy_ecs::query::QueryData;

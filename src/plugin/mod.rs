@@ -8,6 +8,9 @@
 //! | [`MarbleEventsPlugin`] | impacts, contacts started and ended, sensors entered and left, as messages and observer events ([`crate::events`]) |
 //! | [`MarbleInterpolationPlugin`] | [`TransformInterpolation`]: `Transform` eased between the last two physics poses every frame |
 //! | [`MarbleDiagnosticsPlugin`] | step time, marbles awake and asleep, contacts, through `bevy_diagnostic` |
+//!
+//! Not in the group: `debug_draw::MarbleDebugDrawPlugin` (feature `debug_draw`), gizmos of
+//! the boards, sensors, contacts and impacts for a game that renders.
 
 use bevy_app::{App, FixedPostUpdate, Plugin, PluginGroup, PluginGroupBuilder};
 use bevy_ecs::intern::Interned;
@@ -19,6 +22,8 @@ use bevy_time::{Fixed, Time};
 use crate::config::StepConfig;
 use crate::schedule::{MarbleSubstep, init_resources, run_step, substep_schedule};
 
+#[cfg(feature = "debug_draw")]
+pub mod debug_draw;
 mod diagnostics;
 mod interpolation;
 mod transform;

@@ -33,7 +33,7 @@ use parry3d::bounding_volume::Aabb;
 
 use crate::components::{Collider, Mass, Position, Radius, Rotation};
 use crate::config::{GravityTilt, StepConfig};
-use crate::events::MarbleImpact;
+use crate::events::{MarbleImpact, SensorEntered};
 use crate::pairs::MarbleContacts;
 use crate::simulation::Simulation;
 
@@ -135,6 +135,8 @@ pub struct Recording {
     pub deepest_pair: f32,
     /// The radius deepest penetrations are measured against (the largest marble's), m.
     pub radius_max: f32,
+    /// Each of the simulation's sensors: its name and how many times a marble entered it.
+    pub sensor_entries: Vec<(String, u64)>,
 }
 
 /// Samples a [`Simulation`] as it steps into a [`Recording`].
@@ -211,6 +213,14 @@ impl Recorder {
                 speed_mean: Vec::new(),
                 deepest_board: 0.0,
                 deepest_pair: 0.0,
+                sensor_entries: sim
+                    .sensors()
+                    .iter()
+                    .map(|&e| {
+                        let name = world.get::<bevy_ecs::name::Name>(e);
+                        (name.map_or_else(String::new, |n| n.as_str().to_owned()), 0)
+                    })
+                    .collect(),
             },
         };
         recorder.record(sim, 0);
@@ -242,6 +252,13 @@ impl Recorder {
             let k = self.impacts_per_frame;
             if self.pending.len() > 4 * k.max(64) {
                 self.keep_strongest();
+            }
+        }
+        if let Some(messages) = sim.world().get_resource::<Messages<SensorEntered>>() {
+            for m in messages.iter_current_update_messages() {
+                if let Some(i) = sim.sensors().iter().position(|&e| e == m.sensor) {
+                    self.rec.sensor_entries[i].1 += 1;
+                }
             }
         }
         if step.is_multiple_of(self.stride) || step == self.steps {
