@@ -15,9 +15,9 @@ Xvfb :99 -screen 0 1280x800x24 >/dev/null 2>&1 &
 xvfb=$!
 sleep 1
 export DISPLAY=:99 XDG_RUNTIME_DIR="$runtime" WINIT_UNIX_BACKEND=x11
-target/release/marble-labyrinth --autoplay --exit-after "$seconds" > "$runtime/game.log" 2>&1 &
+target/release/marble-labyrinth --many --autoplay --exit-after "$seconds" > "$runtime/game.log" 2>&1 &
 game=$!
-# The autoplay tilts from 1.5 s of game time; software rendering starts slowly, so wait
+# The autoplay sweeps the tilt from 1 s of game time (300 marbles: --many); software rendering starts slowly, so wait
 # for most of the run before the capture.
 sleep "$(( seconds - 2 ))"
 xwd -root -silent -display :99 > "$runtime/shot.xwd"

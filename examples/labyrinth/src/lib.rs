@@ -360,8 +360,9 @@ fn judge(
     }
 }
 
-/// Changes the number of marbles: extras are spawned over the start band (two rows of
-/// cells along the start wall), or removed; marble collisions on with more than one.
+/// Changes the number of marbles: extras are spawned in one layer over the board's free
+/// floor (a grid 2.6 radii apart, clear of walls and holes), or removed; marble
+/// collisions on with more than one.
 fn set_marbles(
     mut requests: MessageReader<SetMarbles>,
     level: Option<Res<Level>>,
@@ -394,16 +395,7 @@ fn set_marbles(
         .cloned()
         .unwrap_or_else(|| MarbleDesc::at([0.0; 3]));
     let r = template.radius;
-    // A grid 2.5 r apart over the board's first two rows, in layers 2.5 r apart.
-    let across = 18usize;
-    for k in have.len()..n {
-        let k = k - 1;
-        let (i, j, layer) = (k % across, (k / across) % 3, k / (across * 3));
-        let local = Vec3::new(
-            -0.23 + 2.7 * r * i as f32,
-            r + 0.004 + 2.5 * r * layer as f32,
-            -0.23 + 2.7 * r * j as f32,
-        );
+    for local in free_floor(&level.scene, r).into_iter().take(n - have.len()) {
         let mut marble = commands.spawn((
             PlayerMarble,
             Marble,
@@ -417,4 +409,66 @@ fn set_marbles(
             marble.insert((AngularVelocity::default(), Rotation::default()));
         }
     }
+}
+
+/// Places for marbles of radius `r` resting on the first board's floor (its parts below
+/// y = 0), in its frame: a grid 2.6 r apart, each point over floor, at least r clear of
+/// every wall (the parts above y = 0) and of every hole.
+pub fn free_floor(scene: &Scene, r: f32) -> Vec<Vec3> {
+    let ShapeDesc::Compound(parts) = &scene.boards[0].shape else {
+        return Vec::new();
+    };
+    // Boxes in the board's xz plane: (centre, half extents), grown by `grow`.
+    let boxes =
+        |keep: &dyn Fn(&bevy_marble::scene::PartDesc) -> bool, grow: f32| -> Vec<(Vec2, Vec2)> {
+            parts
+                .iter()
+                .filter(|p| keep(p))
+                .filter_map(|p| match p.shape {
+                    ShapeDesc::Cuboid { half_extents: h } => Some((
+                        Vec2::new(p.position[0], p.position[2]),
+                        Vec2::new(h[0], h[2]) + Vec2::splat(grow),
+                    )),
+                    _ => None,
+                })
+                .collect()
+        };
+    let floor = boxes(&|p| p.position[1] < 0.0, -r * 0.5);
+    let walls = boxes(&|p| p.position[1] >= 0.0, r);
+    let holes: Vec<(Vec2, Vec2)> = scene
+        .sensors
+        .iter()
+        .filter(|s| s.name == "hole")
+        .filter_map(|s| match s.shape {
+            ShapeDesc::Cuboid { half_extents: h } => Some((
+                Vec2::new(s.position[0], s.position[2]),
+                Vec2::new(h[0], h[2]) + Vec2::splat(r),
+            )),
+            _ => None,
+        })
+        .collect();
+    let inside = |p: Vec2, (c, h): &(Vec2, Vec2)| (p - *c).abs().cmple(*h).all();
+    let (lo, hi) = floor
+        .iter()
+        .fold((Vec2::MAX, Vec2::MIN), |(lo, hi), (c, h)| {
+            (lo.min(*c - *h), hi.max(*c + *h))
+        });
+    let step = 2.6 * r;
+    let mut out = Vec::new();
+    let mut z = lo.y + r;
+    while z <= hi.y - r {
+        let mut x = lo.x + r;
+        while x <= hi.x - r {
+            let p = Vec2::new(x, z);
+            if floor.iter().any(|b| inside(p, b))
+                && !walls.iter().any(|b| inside(p, b))
+                && !holes.iter().any(|b| inside(p, b))
+            {
+                out.push(Vec3::new(x, r + 0.001, z));
+            }
+            x += step;
+        }
+        z += step;
+    }
+    out
 }

@@ -257,7 +257,7 @@ fn dress_level(
 
 /// Where the camera sits relative to what it follows: above and towards +z (the player's
 /// side of the board), m.
-const CAMERA_OFFSET: Vec3 = Vec3::new(0.0, 0.36, 0.30);
+const CAMERA_OFFSET: Vec3 = Vec3::new(0.0, 0.42, 0.36);
 
 /// New marbles get their mesh, a `Transform` at their place and interpolation.
 fn dress_marbles(
@@ -339,10 +339,13 @@ fn keys(
     }
 }
 
-/// The camera eases towards the marbles' centre.
+/// The camera eases towards a point between the marbles' centre and the board's, so that
+/// the way ahead stays in view.
 fn follow_camera(
     time: Res<Time>,
+    level: Res<Level>,
     marbles: Query<&Transform, (With<PlayerMarble>, Without<Follow>)>,
+    boards: Query<&Position, With<Board>>,
     mut camera: Query<(&mut Transform, &mut Follow)>,
 ) {
     let (mut sum, mut n) = (Vec3::ZERO, 0.0);
@@ -355,12 +358,13 @@ fn follow_camera(
     let Ok((mut transform, mut follow)) = camera.single_mut() else {
         return;
     };
+    let centre = boards.get(level.board).map_or(level.pivot, |p| p.0);
     if n > 0.0 {
         let k = 1.0 - (-4.0 * time.delta_secs()).exp();
-        follow.0 = follow.0.lerp(sum / n, k);
+        follow.0 = follow.0.lerp((sum / n).lerp(centre, 0.4), k);
     }
     // Many marbles: stand back to see the board.
-    let back = if n > 1.0 { 2.0 } else { 1.0 };
+    let back = if n > 1.0 { 1.8 } else { 1.0 };
     *transform =
         Transform::from_translation(follow.0 + CAMERA_OFFSET * back).looking_at(follow.0, Vec3::Y);
 }
@@ -411,7 +415,7 @@ fn update_hud(
         .best
         .map_or(String::new(), |b| format!("   best {b:.1} s"));
     **text = format!(
-        "time {:5.1} s   home {}   lost {}{best}\n{} marble{}   tilt {:4.1}°   {:.0} fps",
+        "time {:5.1} s   home {}   lost {}{best}\n{} marble{}   tilt {:4.1} deg   {:.0} fps",
         score.time,
         score.home,
         score.lost,

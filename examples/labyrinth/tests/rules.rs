@@ -335,3 +335,30 @@ fn the_level_through_marble_run_follows_the_game_bit_for_bit() {
     assert!((path[path.len() - 1] - path[0]).length() > 0.1);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_many_marbles_mode_places_them_on_free_floor_and_keeps_them_on_the_board() {
+    // 300 marbles in one layer: none in a hole or a wall at the start, and after 2 s on a
+    // level board (no input) none has been lost: they were placed at rest on floor.
+    let level = classic();
+    let r = level.marbles[0].radius;
+    let spots = free_floor(&level, r);
+    assert!(spots.len() >= MANY, "{} places", spots.len());
+    for (i, a) in spots.iter().enumerate() {
+        for b in &spots[i + 1..] {
+            assert!((*a - *b).length() >= 2.0 * r, "{a} and {b} overlap");
+        }
+    }
+    let mut app = app(level);
+    app.world_mut().write_message(SetMarbles(MANY));
+    run_until(&mut app, 400, |_| Vec2::ZERO, |_| false);
+    let count = app
+        .world_mut()
+        .query_filtered::<(), With<PlayerMarble>>()
+        .iter(app.world())
+        .count();
+    assert_eq!(count, MANY);
+    assert!(app.world().resource::<StepConfig>().marble_collisions);
+    let score = *app.world().resource::<Score>();
+    assert_eq!((score.home, score.lost), (0, 0), "none lost, none home");
+}
