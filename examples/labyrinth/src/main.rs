@@ -7,8 +7,9 @@
 //!
 //! Keys: arrows/WASD tilt · M one marble or 300 · F1 debug drawing · R restart · Esc quit.
 //! Flags: `--level FILE` (a scene file with sensors named `goal` and `hole`), `--many`,
-//! `--record FILE.csv` (the board's poses, for `marble run --poses`), `--autoplay` and
-//! `--exit-after SECONDS` (for the screenshot script).
+//! `--record FILE.csv` (the board's poses, for `marble run --poses`), `--debug` (start
+//! with the debug drawing on), `--autoplay` and `--exit-after SECONDS` (for the
+//! screenshot script).
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -30,6 +31,7 @@ struct Args {
     record: Option<PathBuf>,
     autoplay: bool,
     exit_after: Option<f32>,
+    debug: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -41,6 +43,7 @@ fn parse_args() -> Result<Args, String> {
             "--many" => args.many = true,
             "--record" => args.record = Some(it.next().ok_or("--record needs a file")?.into()),
             "--autoplay" => args.autoplay = true,
+            "--debug" => args.debug = true,
             "--exit-after" => {
                 let v = it.next().ok_or("--exit-after needs seconds")?;
                 let s: f32 = v
@@ -81,7 +84,7 @@ fn main() -> AppExit {
         }))
         .add_plugins((LabyrinthPlugin { level }, MarbleDebugDrawPlugin))
         .insert_resource(MarbleDebugDraw {
-            enabled: false,
+            enabled: args.debug,
             ..default()
         })
         .insert_resource(ClearColor(Color::srgb(0.05, 0.06, 0.08)))
