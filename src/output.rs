@@ -232,87 +232,98 @@ pub fn plot_svg(rec: &crate::replay::Recording) -> io::Result<String> {
             top_view(rec, &left)?;
             let (upper, lower) = right.split_vertically(340);
             let times: Vec<f32> = (0..rec.frames()).map(|f| rec.time(f)).collect();
-            let t1 = times.last().copied().unwrap_or(0.0).max(1e-6);
-            let line = |values: &[f64]| -> Vec<(f32, f64)> {
-                times.iter().copied().zip(values.iter().copied()).collect()
+            let line = |values: &mut dyn Iterator<Item = f64>| -> Vec<(f32, f64)> {
+                times.iter().copied().zip(values).collect()
             };
-            let energy = line(&rec.energy);
-            let kinetic = line(&rec.kinetic);
-            let (e0, e1) = span(energy.iter().chain(&kinetic).map(|p| p.1));
-            let mut chart = ChartBuilder::on(&upper)
-                .caption("energy of the marbles", ("sans-serif", 16))
-                .margin(12)
-                .x_label_area_size(36)
-                .y_label_area_size(70)
-                .build_cartesian_2d(0f32..t1, e0..e1)?;
-            chart
-                .configure_mesh()
-                .x_desc("time (s)")
-                .y_desc("energy (J)")
-                .draw()?;
-            chart
-                .draw_series(LineSeries::new(energy, BLUE.stroke_width(2)))?
-                .label("total (kinetic + potential)")
-                .legend(|(x, y)| PathElement::new([(x, y), (x + 18, y)], BLUE.stroke_width(2)));
-            let orange = RGBColor(240, 140, 46);
-            chart
-                .draw_series(LineSeries::new(kinetic, orange.stroke_width(2)))?
-                .label("kinetic")
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 18, y)], orange.stroke_width(2))
-                });
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK.mix(0.3))
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()?;
-            let fastest: Vec<(f32, f64)> = times
-                .iter()
-                .copied()
-                .zip(rec.speed_max.iter().map(|&v| v as f64))
-                .collect();
-            let mean: Vec<(f32, f64)> = times
-                .iter()
-                .copied()
-                .zip(rec.speed_mean.iter().map(|&v| v as f64))
-                .collect();
-            let (_, v1) = span(fastest.iter().map(|p| p.1));
-            let mut chart = ChartBuilder::on(&lower)
-                .caption("speed of the marbles", ("sans-serif", 16))
-                .margin(12)
-                .x_label_area_size(36)
-                .y_label_area_size(70)
-                .build_cartesian_2d(0f32..t1, 0f64..v1.max(1e-6))?;
-            chart
-                .configure_mesh()
-                .x_desc("time (s)")
-                .y_desc("speed (m/s)")
-                .draw()?;
-            let red = RGBColor(232, 65, 60);
-            let teal = RGBColor(43, 150, 140);
-            chart
-                .draw_series(LineSeries::new(fastest, red.stroke_width(2)))?
-                .label("fastest")
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], red.stroke_width(2)));
-            chart
-                .draw_series(LineSeries::new(mean, teal.stroke_width(2)))?
-                .label("mean")
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 18, y)], teal.stroke_width(2))
-                });
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK.mix(0.3))
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()?;
+            time_panel(
+                &upper,
+                ("energy of the marbles", "energy (J)"),
+                &[
+                    (
+                        "total (kinetic + potential)",
+                        BLUE,
+                        line(&mut rec.energy.iter().copied()),
+                    ),
+                    (
+                        "kinetic",
+                        RGBColor(240, 140, 46),
+                        line(&mut rec.kinetic.iter().copied()),
+                    ),
+                ],
+                false,
+            )?;
+            time_panel(
+                &lower,
+                ("speed of the marbles", "speed (m/s)"),
+                &[
+                    (
+                        "fastest",
+                        RGBColor(232, 65, 60),
+                        line(&mut rec.speed_max.iter().map(|&v| v as f64)),
+                    ),
+                    (
+                        "mean",
+                        RGBColor(43, 150, 140),
+                        line(&mut rec.speed_mean.iter().map(|&v| v as f64)),
+                    ),
+                ],
+                true,
+            )?;
             root.present()?;
             Ok(())
         };
         draw().map_err(|e| io::Error::other(e.to_string()))?;
     }
     Ok(svg)
+}
+
+/// One panel of series over time, `(caption, y axis)`, with a legend; from zero when
+/// `from_zero`, else over the values' span.
+#[cfg(feature = "cli")]
+fn time_panel<DB: plotters::prelude::DrawingBackend>(
+    area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    (caption, y_desc): (&str, &str),
+    series: &[(&str, plotters::style::RGBColor, Vec<(f32, f64)>)],
+    from_zero: bool,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    use plotters::prelude::*;
+    let t1 = series
+        .iter()
+        .flat_map(|s| s.2.last().map(|p| p.0))
+        .fold(0.0f32, f32::max)
+        .max(1e-6);
+    let (lo, hi) = span(series.iter().flat_map(|s| s.2.iter().map(|p| p.1)));
+    let lo = if from_zero { 0.0 } else { lo };
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 16))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0f32..t1, lo..hi.max(lo + 1e-6))?;
+    chart
+        .configure_mesh()
+        .x_desc("time (s)")
+        .y_desc(y_desc)
+        .draw()?;
+    for &(label, colour, ref points) in series {
+        chart
+            .draw_series(LineSeries::new(
+                points.iter().copied(),
+                colour.stroke_width(2),
+            ))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.3))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    Ok(())
 }
 
 /// The least and greatest finite value, padded by 5% (a flat series gets a unit span).
