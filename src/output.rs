@@ -216,7 +216,7 @@ const TRAILS: usize = 300;
 #[cfg(feature = "cli")]
 const TRAIL_POINTS: usize = 240;
 
-/// The run's pictures as one SVG: a top view of the boards (as at the
+/// The run's pictures as one SVG: a top view of the boards and sensors (as at the
 /// start) with each marble's trail coloured by its speed and its last position marked,
 /// and beside it the marbles' energy and their fastest and mean speed over time.
 #[cfg(feature = "cli")]
@@ -368,12 +368,14 @@ where
             hi = hi.max(glam::Vec2::new(p.x, p.z));
         }
     };
-    let lines: Vec<[glam::Vec3; 2]> = rec
-        .boards
-        .iter()
-        .filter_map(|b| b.poses.first().map(|pose| (b, pose)))
-        .flat_map(|(b, &(p, q))| b.segments.iter().map(move |s| s.map(|x| p + q * x)))
-        .collect();
+    let at_start = |tracks: &[crate::replay::BoardTrack]| -> Vec<[glam::Vec3; 2]> {
+        tracks
+            .iter()
+            .filter_map(|b| b.poses.first().map(|pose| (b, pose)))
+            .flat_map(|(b, &(p, q))| b.segments.iter().map(move |s| s.map(|x| p + q * x)))
+            .collect()
+    };
+    let (lines, sensor_lines) = (at_start(&rec.boards), at_start(&rec.sensors));
     lines.iter().flatten().for_each(|&p| add(p));
     for f in 0..rec.frames() {
         rec.positions(f).iter().for_each(|&p| add(p));
@@ -403,12 +405,16 @@ where
         .x_desc("x (m)")
         .y_desc("z (m)")
         .draw()?;
-    let grey = RGBColor(120, 128, 140);
-    chart.draw_series(
-        lines
-            .iter()
-            .map(|[a, b]| PathElement::new([(a.x, a.z), (b.x, b.z)], grey.stroke_width(1))),
-    )?;
+    // Boards in grey, sensors (goals, holes) in amber.
+    for (set, colour) in [
+        (&lines, RGBColor(120, 128, 140)),
+        (&sensor_lines, RGBColor(220, 170, 30)),
+    ] {
+        chart
+            .draw_series(set.iter().map(|[a, b]| {
+                PathElement::new([(a.x, a.z), (b.x, b.z)], colour.stroke_width(1))
+            }))?;
+    }
     // The colour scale: the 98th percentile of the recorded speeds.
     let mut speeds: Vec<f32> = (0..rec.frames())
         .flat_map(|f| rec.velocities(f).iter().map(|v| v.length()))

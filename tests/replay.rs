@@ -455,3 +455,33 @@ fn many_marbles_are_shown_every_kth_within_the_budget() {
     assert_eq!(data["marbleStride"], 3);
     assert_eq!(f32s(&data["positions"]).len(), rec.frames() * 17 * 3);
 }
+
+#[test]
+fn sensors_are_recorded_where_their_board_carries_them() {
+    // The tilting labyrinth with a goal carried by its board: the page holds the goal's
+    // outline and its pose at every frame, the board's pose composed with its own.
+    let mut scene = scenes::labyrinth(5);
+    scene.sensors.push(bevy_marble::scene::SensorDesc {
+        name: "goal".into(),
+        shape: ShapeDesc::Cuboid {
+            half_extents: [0.02, 0.02, 0.02],
+        },
+        board: Some(0),
+        position: [0.1, 0.02, 0.1],
+        rotation: [0.0, 0.0, 0.0, 1.0],
+    });
+    let (_, rec) = record(&scene, 60, ReplayOptions::default());
+    let (board, goal) = (&rec.boards[0], &rec.sensors[0]);
+    assert_eq!(goal.segments.len(), 12, "a box's edges");
+    assert_eq!(goal.poses.len(), rec.frames());
+    assert!(!goal.is_still(), "it tilts with the board");
+    for ((bp, bq), (gp, gq)) in board.poses.iter().zip(&goal.poses) {
+        assert!((*gp - (*bp + *bq * Vec3::new(0.1, 0.02, 0.1))).length() < 1e-6);
+        assert!((*gq - *bq).length() < 1e-6, "{gq} against {bq}");
+    }
+    let mut page = Vec::new();
+    rec.write_html(&mut page).unwrap();
+    let data = page_data(std::str::from_utf8(&page).unwrap());
+    assert_eq!(f32s(&data["sensors"][0]["poses"]).len(), 7 * rec.frames());
+    assert_eq!(f32s(&data["sensors"][0]["segments"]).len(), 12 * 6);
+}

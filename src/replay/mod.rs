@@ -114,6 +114,8 @@ pub struct Recording {
     velocities: Vec<Vec3>,
     /// The boards, in the scene's order.
     pub boards: Vec<BoardTrack>,
+    /// The sensors (goals, holes), in the scene's order, drawn the same way.
+    pub sensors: Vec<BoardTrack>,
     /// The strongest impacts of each frame's interval, in time order.
     pub impacts: Vec<Impact>,
     /// Every impact of the run, counted.
@@ -172,16 +174,14 @@ impl Recorder {
             masses.push(world.get::<Mass>(e).map_or(0.0, Mass::get));
         }
         let extent = plane_extent(sim);
-        let boards = sim
-            .boards()
-            .iter()
-            .map(|&b| BoardTrack {
-                segments: world
-                    .get::<Collider>(b)
-                    .map_or_else(Vec::new, |c| wireframe::segments(&c.0, extent)),
-                poses: Vec::new(),
-            })
-            .collect();
+        let track = |e: &bevy_ecs::entity::Entity| BoardTrack {
+            segments: world
+                .get::<Collider>(*e)
+                .map_or_else(Vec::new, |c| wireframe::segments(&c.0, extent)),
+            poses: Vec::new(),
+        };
+        let boards = sim.boards().iter().map(track).collect();
+        let sensors = sim.sensors().iter().map(track).collect();
         let mut recorder = Recorder {
             steps,
             stride,
@@ -204,6 +204,7 @@ impl Recorder {
                 positions: Vec::new(),
                 velocities: Vec::new(),
                 boards,
+                sensors,
                 impacts: Vec::new(),
                 impact_count: 0,
                 fastest_impact: 0.0,
@@ -322,9 +323,11 @@ impl Recorder {
         } else {
             (sum / count as f64) as f32
         });
-        for (track, &b) in rec.boards.iter_mut().zip(sim.boards()) {
-            let p = world.get::<Position>(b).map_or(Vec3::ZERO, |p| p.0);
-            let q = world.get::<Rotation>(b).map_or(Quat::IDENTITY, |r| r.0);
+        let tracks = (rec.boards.iter_mut().zip(sim.boards()))
+            .chain(rec.sensors.iter_mut().zip(sim.sensors()));
+        for (track, &e) in tracks {
+            let p = world.get::<Position>(e).map_or(Vec3::ZERO, |p| p.0);
+            let q = world.get::<Rotation>(e).map_or(Quat::IDENTITY, |r| r.0);
             track.poses.push(match tilt {
                 Some(t) => (t.pivot + t.rotation * (p - t.pivot), t.rotation * q),
                 None => (p, q),
@@ -451,10 +454,8 @@ impl Recording {
             base64(&bytes)
         };
         let vec3s = |v: &[Vec3]| f32s(&mut v.iter().flat_map(|p| p.to_array()));
-        let boards: Vec<serde_json::Value> = self
-            .boards
-            .iter()
-            .map(|b| {
+        let tracks = |tracks: &[BoardTrack]| -> Vec<serde_json::Value> {
+            tracks.iter().map(|b| {
                 let poses = if b.is_still() {
                     &b.poses[..1.min(b.poses.len())]
                 } else {
@@ -467,7 +468,8 @@ impl Recording {
                     })),
                 })
             })
-            .collect();
+            .collect()
+        };
         let times: Vec<f32> = (0..self.frames()).map(|f| self.time(f)).collect();
         serde_json::json!({
             "title": self.title,
@@ -479,7 +481,8 @@ impl Recording {
             "times": times,
             "positions": vec3s(&self.positions),
             "velocities": vec3s(&self.velocities),
-            "boards": boards,
+            "boards": tracks(&self.boards),
+            "sensors": tracks(&self.sensors),
             "impacts": {
                 "time": f32s(&mut self.impacts.iter().map(|i| i.time)),
                 "marble": base64(&self.impacts.iter().flat_map(|i| i.marble.to_le_bytes()).collect::<Vec<u8>>()),
