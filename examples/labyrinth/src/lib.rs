@@ -98,7 +98,8 @@ pub enum MarbleFate {
     Lost(Entity),
 }
 
-/// Asks for this many marbles (1: the one-marble mode; more: marble collisions on).
+/// Starts again with this many marbles (1: the one-marble mode; more: marble collisions
+/// on; the number there is now: a restart).
 #[derive(Message, Clone, Copy, Debug, PartialEq)]
 pub struct SetMarbles(pub usize);
 
@@ -360,34 +361,37 @@ fn judge(
     }
 }
 
-/// Changes the number of marbles: extras are spawned in one layer over the board's free
-/// floor (a grid 2.6 radii apart, clear of walls and holes), or removed; marble
-/// collisions on with more than one.
+/// Starts again with `n` marbles (the same number: a restart). The level's marble goes
+/// back to the start and the others to places in one layer over the board's free floor
+/// (a grid 2.6 radii apart, clear of walls and holes), at rest; marbles are spawned or
+/// removed to make `n`; marble collisions are on with more than one; the score is reset.
 fn set_marbles(
     mut requests: MessageReader<SetMarbles>,
     level: Option<Res<Level>>,
     mut config: ResMut<StepConfig>,
-    marbles: Query<Entity, With<PlayerMarble>>,
-    boards: Query<(&Position, &Rotation), With<Board>>,
+    mut marbles: Query<
+        (
+            Entity,
+            &mut Position,
+            &mut Velocity,
+            Option<&mut AngularVelocity>,
+        ),
+        With<PlayerMarble>,
+    >,
+    boards: Query<(&Position, &Rotation), (With<Board>, Without<PlayerMarble>)>,
     mut score: ResMut<Score>,
     mut commands: Commands,
 ) {
     let (Some(level), Some(&SetMarbles(n))) = (level, requests.read().last()) else {
         return;
     };
-    let n = n.max(1);
-    let have: Vec<Entity> = marbles.iter().collect();
-    config.marble_collisions = n > 1;
-    *score = Score::default();
-    if have.len() > n {
-        for &e in &have[n..] {
-            commands.entity(e).despawn();
-        }
-        return;
-    }
     let Ok((board_p, board_q)) = boards.get(level.board) else {
         return;
     };
+    let (board_p, board_q) = (board_p.0, board_q.0);
+    let n = n.max(1);
+    config.marble_collisions = n > 1;
+    *score = Score::default();
     let template = level
         .scene
         .marbles
@@ -395,11 +399,38 @@ fn set_marbles(
         .cloned()
         .unwrap_or_else(|| MarbleDesc::at([0.0; 3]));
     let r = template.radius;
-    for local in free_floor(&level.scene, r).into_iter().take(n - have.len()) {
+    // The start first, then the free floor (the start cell's own spots left out).
+    let mut places = vec![level.start];
+    places.extend(
+        free_floor(&level.scene, r)
+            .into_iter()
+            .filter(|p| (*p - level.start).length() >= 2.0 * r),
+    );
+    // The level's marble (spawned first) keeps the start.
+    let mut have: Vec<Entity> = marbles.iter().map(|m| m.0).collect();
+    have.sort();
+    for (k, &e) in have.iter().enumerate() {
+        if k >= n {
+            commands.entity(e).despawn();
+            continue;
+        }
+        if let Ok((_, mut position, mut velocity, spin)) = marbles.get_mut(e) {
+            position.0 = board_p + board_q * places[k.min(places.len() - 1)];
+            velocity.0 = Vec3::ZERO;
+            if let Some(mut w) = spin {
+                w.0 = Vec3::ZERO;
+            }
+        }
+    }
+    for local in places
+        .iter()
+        .skip(have.len())
+        .take(n.saturating_sub(have.len()))
+    {
         let mut marble = commands.spawn((
             PlayerMarble,
             Marble,
-            Position(board_p.0 + board_q.0 * local),
+            Position(board_p + board_q * *local),
             Velocity::default(),
             Radius(r),
             Restitution(template.restitution),

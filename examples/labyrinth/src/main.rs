@@ -331,11 +331,7 @@ fn keys(
         set.write(SetMarbles(if n > 1 { 1 } else { MANY }));
     }
     if keys.just_pressed(KeyCode::KeyR) {
-        // Back to one marble at the start (and to as many as before).
-        set.write(SetMarbles(1));
-        if n > 1 {
-            set.write(SetMarbles(n));
-        }
+        set.write(SetMarbles(n));
     }
     if keys.just_pressed(KeyCode::Escape) {
         exit.write(AppExit::Success);

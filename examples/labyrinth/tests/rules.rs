@@ -48,6 +48,19 @@ fn run_until(
     None
 }
 
+/// The classic level after its marble was tilted into the first row's hole.
+fn app_after_a_loss() -> App {
+    let mut app = app(classic());
+    run_until(
+        &mut app,
+        600,
+        |_| Vec2::new(1.0, 0.0),
+        |a| a.world().resource::<Score>().lost > 0,
+    )
+    .expect("lost");
+    app
+}
+
 fn marble(app: &mut App) -> (Vec3, Vec3) {
     let mut q = app
         .world_mut()
@@ -361,4 +374,31 @@ fn the_many_marbles_mode_places_them_on_free_floor_and_keeps_them_on_the_board()
     assert!(app.world().resource::<StepConfig>().marble_collisions);
     let score = *app.world().resource::<Score>();
     assert_eq!((score.home, score.lost), (0, 0), "none lost, none home");
+}
+
+#[test]
+fn a_restart_brings_the_marble_back_and_clears_the_score() {
+    // A restart with one marble, after a loss and while it rolls again: it is back at the
+    // start (within a step's roll), and the score is clear.
+    let mut app_one = app_after_a_loss();
+    let now = steps(&app_one);
+    run_until(&mut app_one, now + 40, |_| Vec2::new(1.0, 0.0), |_| false);
+    let level = app_one.world().resource::<Level>().clone();
+    let (away, _) = marble(&mut app_one);
+    let board_p = app_one.world().get::<Position>(level.board).unwrap().0;
+    let board_q = app_one.world().get::<Rotation>(level.board).unwrap().0;
+    assert!(
+        (away - (board_p + board_q * level.start)).length() > 0.02,
+        "it rolled off"
+    );
+    app_one.world_mut().write_message(SetMarbles(1));
+    app_one.update();
+    let board_p = app_one.world().get::<Position>(level.board).unwrap().0;
+    let board_q = app_one.world().get::<Rotation>(level.board).unwrap().0;
+    let (p, _) = marble(&mut app_one);
+    assert!(
+        (p - (board_p + board_q * level.start)).length() < 0.01,
+        "at {p}"
+    );
+    assert_eq!(app_one.world().resource::<Score>().lost, 0);
 }
