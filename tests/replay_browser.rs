@@ -180,6 +180,25 @@ fn the_page_loads_draws_and_places_the_marbles_where_the_csv_says() {
         }
     }
 
+    // Hovering over marble 0 shows its index, position and velocity (4 decimals).
+    let hover = report["hover"].as_str().expect("a tooltip over marble 0");
+    assert!(hover.starts_with("marble 0\n"), "{hover:?}");
+    let numbers = |label: &str| -> Vec<f32> {
+        let line = hover.lines().find(|l| l.starts_with(label)).expect(label);
+        line.split_whitespace()
+            .filter_map(|w| w.parse().ok())
+            .collect()
+    };
+    let shown = [numbers("position"), numbers("velocity")].concat();
+    assert_eq!(shown.len(), 6, "{hover:?}");
+    for (k, (s, v)) in shown.iter().zip(&csv[0]).enumerate() {
+        // Rounded to 4 decimals.
+        assert!(
+            (s - v).abs() <= 5e-5 + 1e-7,
+            "component {k}: shown {s}, the CSV's {v}"
+        );
+    }
+
     // A screenshot of the page half way through, for people to look at.
     let shot = dir.join("replay.png");
     let mut capture = chromium(&browser, &dir.join("profile"));
