@@ -125,6 +125,26 @@ pub enum LabyrinthSystems {
     Judge,
 }
 
+/// What sending a marble somewhere changes: where it is and how it moves.
+type Motion = (
+    Entity,
+    &'static mut Position,
+    &'static mut Velocity,
+    Option<&'static mut AngularVelocity>,
+);
+
+/// Puts a marble at `at` (world frame), at rest: a teleport.
+fn place_at_rest(
+    (_, mut position, mut velocity, spin): bevy::ecs::query::QueryItem<'_, '_, Motion>,
+    at: Vec3,
+) {
+    position.0 = at;
+    velocity.0 = Vec3::ZERO;
+    if let Some(mut w) = spin {
+        w.0 = Vec3::ZERO;
+    }
+}
+
 /// A marble this far below the board's lowest point has left it, m.
 const FALL_OUT: f32 = 0.5;
 
@@ -286,15 +306,7 @@ fn judge(
     mut score: ResMut<Score>,
     time: Res<Time<Fixed>>,
     boards: Query<(&Position, &Rotation), (With<Board>, Without<PlayerMarble>)>,
-    mut marbles: Query<
-        (
-            Entity,
-            &mut Position,
-            &mut Velocity,
-            Option<&mut AngularVelocity>,
-        ),
-        With<PlayerMarble>,
-    >,
+    mut marbles: Query<Motion, With<PlayerMarble>>,
     mut respawned: Local<u32>,
 ) {
     let Some(level) = level else { return };
@@ -337,7 +349,7 @@ fn judge(
         }
     }
     for marble in restart {
-        if let Ok((_, mut position, mut velocity, spin)) = marbles.get_mut(marble) {
+        if let Ok(motion) = marbles.get_mut(marble) {
             // The start, in the board's frame as it is now; many marbles spread over the
             // first cell's width so that they do not all land on one spot.
             let spread = if single {
@@ -352,11 +364,7 @@ fn judge(
                 ) * 0.03
             };
             let lift = if single { Vec3::ZERO } else { Vec3::Y * 0.02 };
-            position.0 = board_p + board_q * (level.start + spread + lift);
-            velocity.0 = Vec3::ZERO;
-            if let Some(mut w) = spin {
-                w.0 = Vec3::ZERO;
-            }
+            place_at_rest(motion, board_p + board_q * (level.start + spread + lift));
         }
     }
 }
@@ -369,15 +377,7 @@ fn set_marbles(
     mut requests: MessageReader<SetMarbles>,
     level: Option<Res<Level>>,
     mut config: ResMut<StepConfig>,
-    mut marbles: Query<
-        (
-            Entity,
-            &mut Position,
-            &mut Velocity,
-            Option<&mut AngularVelocity>,
-        ),
-        With<PlayerMarble>,
-    >,
+    mut marbles: Query<Motion, With<PlayerMarble>>,
     boards: Query<(&Position, &Rotation), (With<Board>, Without<PlayerMarble>)>,
     mut score: ResMut<Score>,
     mut commands: Commands,
@@ -414,12 +414,8 @@ fn set_marbles(
             commands.entity(e).despawn();
             continue;
         }
-        if let Ok((_, mut position, mut velocity, spin)) = marbles.get_mut(e) {
-            position.0 = board_p + board_q * places[k.min(places.len() - 1)];
-            velocity.0 = Vec3::ZERO;
-            if let Some(mut w) = spin {
-                w.0 = Vec3::ZERO;
-            }
+        if let Ok(motion) = marbles.get_mut(e) {
+            place_at_rest(motion, board_p + board_q * places[k.min(places.len() - 1)]);
         }
     }
     for local in places
