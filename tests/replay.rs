@@ -64,6 +64,18 @@ fn temp_dir(name: &str) -> std::path::PathBuf {
     dir
 }
 
+/// `marble run` on [`small_scene`], written into `dir`, with `args` after the scene.
+fn run_small(dir: &std::path::Path, args: &[&std::ffi::OsStr]) -> std::process::Output {
+    let scene_path = dir.join("small.ron");
+    std::fs::write(&scene_path, small_scene().to_ron_string()).unwrap();
+    Command::new(env!("CARGO_BIN_EXE_marble"))
+        .arg("run")
+        .arg(&scene_path)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
 /// `step → marble → [x, y, z, vx, vy, vz]` from the contract's CSV.
 fn csv_states(csv: &str) -> HashMap<u64, Vec<[f32; 6]>> {
     let mut out: HashMap<u64, Vec<[f32; 6]>> = HashMap::new();
@@ -81,24 +93,25 @@ fn csv_states(csv: &str) -> HashMap<u64, Vec<[f32; 6]>> {
 #[test]
 fn the_page_is_self_contained_and_holds_every_frame_with_the_csv_values() {
     let dir = temp_dir("cli");
-    let scene_path = dir.join("small.ron");
-    std::fs::write(&scene_path, small_scene().to_ron_string()).unwrap();
     let (html, csv, svg) = (
         dir.join("run.html"),
         dir.join("run.csv"),
         dir.join("run.svg"),
     );
-    let out = Command::new(env!("CARGO_BIN_EXE_marble"))
-        .arg("run")
-        .arg(&scene_path)
-        .args(["--every", "1", "--quiet", "--csv"])
-        .arg(&csv)
-        .arg("--html")
-        .arg(&html)
-        .arg("--plot")
-        .arg(&svg)
-        .output()
-        .unwrap();
+    let out = run_small(
+        &dir,
+        &[
+            "--every".as_ref(),
+            "1".as_ref(),
+            "--quiet".as_ref(),
+            "--csv".as_ref(),
+            csv.as_os_str(),
+            "--html".as_ref(),
+            html.as_os_str(),
+            "--plot".as_ref(),
+            svg.as_os_str(),
+        ],
+    );
     assert!(
         out.status.success(),
         "{}",
@@ -180,16 +193,8 @@ fn the_page_is_self_contained_and_holds_every_frame_with_the_csv_values() {
 #[test]
 fn a_summary_names_what_happened_and_the_files_written() {
     let dir = temp_dir("summary");
-    let scene_path = dir.join("small.ron");
-    std::fs::write(&scene_path, small_scene().to_ron_string()).unwrap();
     let html = dir.join("run.html");
-    let out = Command::new(env!("CARGO_BIN_EXE_marble"))
-        .arg("run")
-        .arg(&scene_path)
-        .arg("--html")
-        .arg(&html)
-        .output()
-        .unwrap();
+    let out = run_small(&dir, &["--html".as_ref(), html.as_os_str()]);
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
     for row in [
@@ -218,16 +223,8 @@ fn a_summary_names_what_happened_and_the_files_written() {
 #[test]
 fn a_bad_output_path_fails_with_status_1_and_leaves_nothing() {
     let dir = temp_dir("bad");
-    let scene_path = dir.join("small.ron");
-    std::fs::write(&scene_path, small_scene().to_ron_string()).unwrap();
     let html = dir.join("missing-folder").join("run.html");
-    let out = Command::new(env!("CARGO_BIN_EXE_marble"))
-        .arg("run")
-        .arg(&scene_path)
-        .arg("--html")
-        .arg(&html)
-        .output()
-        .unwrap();
+    let out = run_small(&dir, &["--html".as_ref(), html.as_os_str()]);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(
