@@ -317,6 +317,13 @@ impl SensorGrid {
             self.bounds = None;
             return;
         };
+        if !(union.mins.is_finite() && union.maxs.is_finite()) {
+            // Bounds that reach past f32's range (a huge sensor turned) have no grid: every
+            // sensor is checked for every query.
+            self.bounds = None;
+            self.large.extend(0..bounds.len() as u32);
+            return;
+        }
         self.sides.clear();
         self.sides
             .extend(bounds.iter().map(|b| b.extents().max_element().max(1e-6)));
@@ -324,7 +331,12 @@ impl SensorGrid {
         let mut cell = self.sides[self.sides.len() / 2];
         let size = union.extents();
         let dims = loop {
-            let d = (size / cell).ceil().max(Vec3::ONE).as_ivec3();
+            // Each side clamped to the most cells a grid may have, so the product cannot
+            // overflow.
+            let d = (size / cell)
+                .ceil()
+                .clamp(Vec3::ONE, Vec3::splat(Self::MAX_CELLS as f32))
+                .as_ivec3();
             if (d.x as i64) * (d.y as i64) * (d.z as i64) <= Self::MAX_CELLS {
                 break d;
             }

@@ -813,27 +813,42 @@ fn rotation(field: &str, q: [f32; 4]) -> Result<(), SceneError> {
     Ok(())
 }
 
-/// The fuzz harness of `fuzz/` (target `scene_file`) and of its corpus regression test:
-/// `data` as a scene file, RON and JSON both, is either refused (not UTF-8, or a
-/// [`SceneError`] with a message) or gives a scene that builds and steps 30 steps, after
-/// which every marble not quarantined has a finite position and velocity. Panics on a
-/// finding. Scenes that are valid but costly by design (more than 64 marbles or 16
-/// boards, more than 16 substeps) are skipped after parsing, so that the fuzzer spends its
-/// time on inputs rather than on long runs.
+/// The fuzz harness of `fuzz/`'s corpus regression test: `data` as a scene file in both
+/// formats, [`fuzz_scene_ron`] then [`fuzz_scene_json`].
 #[doc(hidden)]
 pub fn fuzz_scene_file(data: &[u8]) {
+    fuzz_scene_ron(data);
+    fuzz_scene_json(data);
+}
+
+/// The fuzz harness of `fuzz/`'s target `scene_ron`: `data` as a RON scene file is either
+/// refused (not UTF-8, or a [`SceneError`] with a message) or gives a scene that builds and
+/// steps 30 steps, after which every marble not quarantined has a finite position and
+/// velocity. Panics on a finding. Scenes that are valid but costly by design (more than 64
+/// marbles or 16 boards, more than 16 substeps) are skipped after parsing, so that the
+/// fuzzer spends its time on inputs rather than on long runs.
+#[doc(hidden)]
+pub fn fuzz_scene_ron(data: &[u8]) {
+    fuzz_parsed(data, Scene::from_ron_str);
+}
+
+/// The fuzz harness of `fuzz/`'s target `scene_json`: as [`fuzz_scene_ron`], for JSON.
+#[doc(hidden)]
+pub fn fuzz_scene_json(data: &[u8]) {
+    fuzz_parsed(data, Scene::from_json_str);
+}
+
+fn fuzz_parsed(data: &[u8], parse: fn(&str) -> Result<Scene, SceneError>) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    for parsed in [Scene::from_ron_str(text), Scene::from_json_str(text)] {
-        match parsed {
-            Ok(scene) => fuzz_steps(&scene),
-            Err(e) => assert!(!e.to_string().is_empty(), "an error without a message"),
-        }
+    match parse(text) {
+        Ok(scene) => fuzz_steps(&scene),
+        Err(e) => assert!(!e.to_string().is_empty(), "an error without a message"),
     }
 }
 
-/// The stepping half of [`fuzz_scene_file`].
+/// The stepping half of the fuzz harnesses.
 fn fuzz_steps(scene: &Scene) {
     if scene.marbles.len() > 64 || scene.boards.len() > 16 || scene.substeps > 16 {
         return;

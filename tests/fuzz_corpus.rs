@@ -1,8 +1,8 @@
 //! The fuzz corpus as a regression test: every file in `fuzz/corpus/scene_file/` (the
-//! built-in scenes, hand-written edge cases, and every finding of `fuzz/`'s `scene_file`
-//! target once fixed) goes through the fuzz harness, `scene::fuzz_scene_file`, on stable
-//! Rust: refused with an error, or built and stepped with every marble finite or
-//! quarantined. Without a panic.
+//! built-in scenes, hand-written edge cases, and every finding of `fuzz/`'s `scene_ron` and
+//! `scene_json` targets once fixed) goes through the fuzz harness as RON and as JSON
+//! (`scene::fuzz_scene_file`), on stable Rust: refused with an error, or built and stepped
+//! with every marble finite or quarantined. Without a panic.
 
 use std::path::Path;
 
@@ -14,7 +14,7 @@ fn every_corpus_file_is_refused_or_steps() {
         .map(|entry| entry.unwrap().path())
         .collect();
     files.sort();
-    assert!(files.len() >= 9, "{} corpus files", files.len());
+    assert!(files.len() >= 12, "{} corpus files", files.len());
     for path in &files {
         let data = std::fs::read(path).unwrap();
         let run = std::panic::catch_unwind(|| bevy_marble::scene::fuzz_scene_file(&data));
