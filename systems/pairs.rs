@@ -8,7 +8,7 @@ use bevy_ecs::query::QueryData;
 use glam::Vec3;
 
 use super::Stepped;
-use crate::board_contact::{BoardCache, NearPieces};
+use crate::board_contact::{BoardCache, NearPieces, touch_tolerance};
 use crate::components::{
     Acceleration, AngularVelocity, Contacts, Friction, Mass, Position, PositionCarry, Radius,
     Restitution, StepStart, Velocity, compensated_add,
@@ -28,7 +28,17 @@ fn params(config: &StepConfig, h: f32) -> PairParams {
 
 /// Copies a marble's board contacts (recorded during a substep of length `h`) into the
 /// solver, the contact point carried with the board to the end of that substep, and the
-/// board's velocity there taken at time `at` of the current substep.
+/// board's velocity there taken at time `at` of the current substep. With `start` (the
+/// contact stage: the marble's centre, radius, touching tolerance, free displacement and
+/// acceleration over the substep), a contact the marble has since left (it bounced off
+/// during the last substep) becomes a speculative row with the gap it now has, if its free
+/// path can close that gap this substep (as for [`speculative_touches`]), and no row
+/// otherwise: held as if it still touched, it would make the pair impulses those of a
+/// marble pinned to a board it does not reach.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "a marble's contacts and state, handed over"
+)]
 fn board_touches(
     solver: &mut PairSolver,
     cache: &BoardCache,
@@ -37,6 +47,7 @@ fn board_touches(
     restitution: f32,
     h: f32,
     at: f32,
+    start: Option<(Vec3, f32, f32, Vec3, Vec3)>,
 ) {
     solver.next_body_touches();
     for c in contacts.iter() {
@@ -44,14 +55,26 @@ fn board_touches(
             continue;
         };
         let point = c.point + board.point_velocity(c.time, c.point) * (h - c.time);
+        let velocity = board.point_velocity(at, point);
+        let mut gap = 0.0;
+        if let Some((x, r, tol, d, a)) = start {
+            let left = (x - point).dot(c.normal) - r;
+            if left > tol {
+                let closing = (-(d - velocity * h).dot(c.normal)).max(0.0) + a.length() * h * h;
+                if left > closing {
+                    continue;
+                }
+                gap = left;
+            }
+        }
         solver.push_board_touch(BoardTouch {
             body,
             normal: c.normal,
             point,
-            velocity: board.point_velocity(at, point),
+            velocity,
             piece: c.piece,
             restitution: 0.5 * (restitution + board.restitution),
-            gap: 0.0,
+            gap,
         });
     }
 }
@@ -167,6 +190,7 @@ pub struct PairImpactStaged {
     mass: &'static Mass,
     restitution: &'static Restitution,
     contacts: &'static Contacts,
+    acceleration: &'static Acceleration,
 }
 
 /// Before integration: the touching pairs of [`crate::pairs`] (collisions at the start,
@@ -231,7 +255,11 @@ pub fn pair_contacts(
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
         let e = m.restitution.0;
-        board_touches(solver, &cache, body as u32, m.contacts, e, h, 0.0);
+        let b = solver.body(body);
+        let (x, r) = (b.x, m.radius.0);
+        let tol = touch_tolerance(config.contact_tolerance, r, x);
+        let start = Some((x, r, tol, b.d, b.a));
+        board_touches(solver, &cache, body as u32, m.contacts, e, h, 0.0, start);
         let b = solver.body(body);
         let state = (b.x, b.v, b.a, b.d);
         speculative_touches(
@@ -310,6 +338,18 @@ pub fn pair_impacts(
             spins: false,
             mu: 0.0,
         });
+        // Where the marble would have got without its boards, and when one first changed
+        // its path (a touch found after the substep's start).
+        let after = m
+            .contacts
+            .iter()
+            .map(|c| c.time)
+            .filter(|&t| t > 0.0)
+            .fold(f32::INFINITY, f32::min);
+        let (dx, dv) = config
+            .integrator
+            .delta(m.start.velocity, m.acceleration.0, h);
+        solver.push_free_end(after, m.start.position + dx, m.start.velocity + dv);
     }
     if !solver.find_impacts(&params) {
         return;
@@ -325,6 +365,7 @@ pub fn pair_impacts(
             m.restitution.0,
             h,
             h,
+            None,
         );
     }
     solver.end_board_touches();

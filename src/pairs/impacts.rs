@@ -3,6 +3,9 @@
 
 use super::*;
 
+/// [`FreeEnd::after`] of a marble the cascade put back on its free path.
+const REWOUND: f32 = f32::NEG_INFINITY;
+
 /// The state of the collision cascade ([`crate::pairs`], step 3).
 pub(super) struct Cascade<'a> {
     p: &'a PairParams,
@@ -11,6 +14,8 @@ pub(super) struct Cascade<'a> {
     shift: bool,
     rows: &'a mut [Row],
     bodies: &'a mut [Body],
+    /// Impact stage: each body's free path (empty in the contact stage).
+    free_ends: &'a mut [FreeEnd],
     touches: &'a [BoardTouch],
     touch_start: &'a [u32],
     /// Velocity change per body.
@@ -25,8 +30,12 @@ pub(super) struct Cascade<'a> {
 impl Cascade<'_> {
     /// Row `k`: the two-body equation if its marbles approach faster than the threshold.
     fn pair(&mut self, k: usize) {
+        let (i, j) = (self.rows[k].i as usize, self.rows[k].j as usize);
+        let t = self.rows[k].t.max(self.event[i]).max(self.event[j]);
+        if self.shift && self.on_changed_path(i, t) | self.on_changed_path(j, t) {
+            self.rewind(k, t);
+        }
         let row = &mut self.rows[k];
-        let (i, j) = (row.i as usize, row.j as usize);
         let u = row.u + (self.dv[j] - self.dv[i]).dot(row.n);
         if u >= -row.limit {
             return;
@@ -54,10 +63,63 @@ impl Cascade<'_> {
         self.queue.push(j as u32);
     }
 
+    /// Body `b` meets another marble at `t`, before a board changed its path.
+    #[inline]
+    fn on_changed_path(&self, b: usize, t: f32) -> bool {
+        self.free_ends
+            .get(b)
+            .is_some_and(|f| f.after > t && f.after < f32::INFINITY)
+    }
+
+    /// Row `k` meets at a time before a board changed the path of one of its marbles (the
+    /// impact stage): the marble never took that path, since the pair's impact comes
+    /// first. Judged on the path the board gave it, the impulse would be the closing speed
+    /// before the board's reaction applied to the velocity after it (a marble sent through
+    /// its neighbour onto a wall, bounced, then hit by the neighbour's impulse too, leaves
+    /// faster than it came). If the pair, judged again with that marble back on its free
+    /// path, collides, the marble stays there and the row takes the new judgement (normal,
+    /// closing speed, time); the late search finds what boards the new path meets.
+    fn rewind(&mut self, k: usize, t: f32) {
+        let row = self.rows[k];
+        let (i, j) = (row.i as usize, row.j as usize);
+        let kept = (self.bodies[i], self.bodies[j]);
+        let back = [i, j].map(|b| self.on_changed_path(b, t));
+        for (b, back) in [i, j].into_iter().zip(back) {
+            if back {
+                let f = self.free_ends[b];
+                self.bodies[b].x = f.x;
+                self.bodies[b].v = f.v;
+            }
+        }
+        let judged =
+            narrow(&*self.bodies, row.i, row.j, self.p).filter(|r| r.kind == Found::Impact);
+        let collides = judged.is_some_and(|r| r.u + (self.dv[j] - self.dv[i]).dot(r.n) < -r.limit);
+        match judged {
+            Some(r) if collides => {
+                for (b, back) in [i, j].into_iter().zip(back) {
+                    if back {
+                        self.free_ends[b].after = REWOUND;
+                        self.changed[b] = true;
+                    }
+                }
+                self.rows[k] = Row {
+                    collided: row.collided,
+                    ..r
+                };
+            }
+            _ => (self.bodies[i], self.bodies[j]) = kept,
+        }
+    }
+
     /// The boards body `b` touches: equation (1) against each one the cascade drives it
     /// into (judged on its end velocity, which the board response already made leave or
     /// rest on the board).
     fn boards(&mut self, b: usize) {
+        if self.free_ends.get(b).is_some_and(|f| f.after == REWOUND) {
+            // Its touches are those of the path it no longer takes; the late search finds
+            // the boards of its new one.
+            return;
+        }
         let mut hit = false;
         let range = self.touch_start[b] as usize..self.touch_start[b + 1] as usize;
         for t in &self.touches[range] {
@@ -139,6 +201,7 @@ impl PairSolver {
             shift,
             rows,
             bodies: &mut self.bodies,
+            free_ends: &mut self.free_ends,
             touches: &self.board_touches,
             touch_start: &self.touch_start,
             dv: &mut self.dv,

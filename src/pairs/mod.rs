@@ -231,6 +231,18 @@ pub struct BoardTouch {
     pub gap: f32,
 }
 
+/// A marble's free path in the impact stage ([`PairSolver::push_free_end`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FreeEnd {
+    /// Time of the first board event after the substep's start, s (`INFINITY`: none, or the
+    /// marble was put back on its free path already).
+    pub(crate) after: f32,
+    /// End of the free path.
+    pub(crate) x: Vec3,
+    /// Velocity at the end of the free path.
+    pub(crate) v: Vec3,
+}
+
 /// The settings the pair stage needs, copied out of [`crate::config::StepConfig`].
 #[derive(Clone, Copy, Debug)]
 pub struct PairParams {
@@ -296,6 +308,9 @@ pub struct PairSolver {
     /// Collision stage: velocity change and time of the last impact per body.
     dv: Vec<Vec3>,
     event: Vec<f32>,
+    /// Impact stage: per body, its free path's end and when a board first changed its
+    /// path this substep ([`PairSolver::push_free_end`]).
+    free_ends: Vec<FreeEnd>,
     /// The rows' pairs by their first body (`i < j`): the `j`s of body `i` are
     /// `known[known_start[i]..known_start[i + 1]]` (a handful in a pile), so that asking
     /// whether a pair is known is a short scan of one body's slice, not a search of all.
@@ -383,6 +398,19 @@ impl PairSolver {
     /// Phase 2: forgets the last substep's bodies.
     pub fn clear_bodies(&mut self) {
         self.bodies.clear();
+        self.free_ends.clear();
+    }
+
+    /// Phase 2 of the impact stage, after each [`PairSolver::push_body`]: that marble's
+    /// free path over the substep ends at `x` with velocity `v` (where it would be had no
+    /// board touched it), and the first board event of its substep (a collision, or a
+    /// landing, after its start) was at `after` s (`f32::INFINITY`: none). A marble that
+    /// collides with another before `after` never took the path the board response gave it
+    /// from then on; the cascade puts it back on its free path first, and the late search
+    /// finds what boards its new path meets.
+    #[inline]
+    pub fn push_free_end(&mut self, after: f32, x: Vec3, v: Vec3) {
+        self.free_ends.push(FreeEnd { after, x, v });
     }
 
     /// Phase 2: the next marble, in the order of its sphere.
@@ -694,6 +722,7 @@ impl PairSolver {
         self.adjacency_start.reserve(n + 1);
         self.dv.reserve(n);
         self.event.reserve(n);
+        self.free_ends.reserve(n);
         self.in_contact.reserve(n);
         self.bound.reserve(n);
         self.spheres.reserve(n);

@@ -65,6 +65,13 @@ impl PairSolver {
                 continue;
             }
             let b = &self.bodies[t.body as usize];
+            if t.gap > 0.0 && (b.v - t.velocity).dot(t.normal) < -p.threshold {
+                // A speculative row closing faster than the threshold (after the cascade):
+                // a collision coming, which the marble–board response resolves at its
+                // instant. Held here as well, the marble would be both stopped by this
+                // row's force and bounced by the response, and leave faster than it came.
+                continue;
+            }
             self.constraints.push(Constraint {
                 i: t.body,
                 j: u32::MAX,
@@ -118,6 +125,26 @@ impl PairSolver {
             }
         }
         self.colour_rows();
+        // A marble approaching a board it touches at the substep's start (slower than the
+        // threshold: faster ones the cascade bounced) has that approach removed by the
+        // marble–board response at the start, as a contact. The passes start from it
+        // removed too, and it is not turned into a force: held here as well, the marble
+        // would be stopped twice and leave as fast as it came.
+        self.dv.clear();
+        self.dv.resize(self.bodies.len(), Vec3::ZERO);
+        for r in &self.board_gs {
+            if r.target == 0.0 {
+                let i = r.i as usize;
+                let v0 = self.bodies[i].v0 + self.dv[i];
+                let u0 = (v0 - r.vb).dot(r.n);
+                if u0 < 0.0 {
+                    self.dv[i] -= u0 * r.n;
+                }
+            }
+        }
+        for (v, d) in self.vel.iter_mut().zip(&self.dv) {
+            *v += d.extend(0.0);
+        }
         let vel = self.vel.as_mut_slice();
         // Warm start.
         for r in &self.pair_pass {
@@ -172,9 +199,20 @@ impl PairSolver {
         for (c, lambda) in self.constraints.iter_mut().zip(lambdas) {
             c.lambda = lambda;
         }
+        // A speculative board row holds its marble in the solve, so that the pair impulses
+        // are those of marbles that the board will stop, but its impulse is not a force:
+        // the marble does not touch the board, and if it reaches it during the substep the
+        // marble–board response stops or bounces it there. As a force as well, it would
+        // push the marble back off a board it reaches anyway (any integrator whose path
+        // runs ahead of the end velocity does), and it would leave.
+        for r in &self.board_gs {
+            if r.target < 0.0 && r.lambda != 0.0 {
+                r.apply(vel, -r.lambda);
+            }
+        }
         let bodies = &mut self.bodies;
-        for (b, v) in bodies.iter_mut().zip(vel.iter()) {
-            b.v = v.truncate();
+        for ((b, v), d) in bodies.iter_mut().zip(vel.iter()).zip(&self.dv) {
+            b.v = v.truncate() - *d;
         }
         self.warm_next.clear();
         for c in &self.constraints {
