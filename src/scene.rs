@@ -14,7 +14,7 @@ use thiserror::Error;
 
 use crate::config::{Integrator, Preset, Sleep, StepConfig};
 use crate::geometry::{BoardGeometry, PartShape};
-use crate::validate::{MAX_COORDINATE, MAX_SPEED};
+use crate::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_SPEED};
 
 /// Why a scene could not be loaded or used. Each is the user's input at fault.
 #[derive(Debug, Error)]
@@ -426,7 +426,12 @@ impl Scene {
             in_range(&f("position"), b.position, MAX_COORDINATE, POSITION_RANGE)?;
             rotation(&f("rotation"), b.rotation)?;
             in_range(&f("velocity"), b.velocity, MAX_SPEED, SPEED_RANGE)?;
-            finite3(&f("angular_velocity"), b.angular_velocity)?;
+            in_range(
+                &f("angular_velocity"),
+                b.angular_velocity,
+                MAX_BOARD_SPIN,
+                BOARD_SPIN_RANGE,
+            )?;
             unit_interval(&f("restitution"), b.restitution)?;
             non_negative(&f("friction"), b.friction)?;
             non_negative(&f("rolling_resistance"), b.rolling_resistance)?;
@@ -758,6 +763,7 @@ fn finite(field: impl FieldName, x: f32) -> Result<(), SceneError> {
 /// [`crate::validate`]).
 const POSITION_RANGE: &str = "within 1e6 m of the origin in each coordinate";
 const SPEED_RANGE: &str = "within 1e5 m/s in each coordinate";
+const BOARD_SPIN_RANGE: &str = "within 1e4 rad/s in each coordinate";
 
 /// Finite, with every coordinate within `max`.
 fn in_range(field: impl FieldName, v: [f32; 3], max: f32, rule: &str) -> Result<(), SceneError> {

@@ -11,10 +11,12 @@
 //! ([`crate::Scene::validate`]), and the newtypes' constructors (`Radius::new` and the
 //! like) tell a program at once.
 //!
-//! **Supported range.** Positions within [`MAX_COORDINATE`] of the origin and speeds up to
-//! [`MAX_SPEED`]: f32 resolves 6 cm at 10⁶ m, where a marble is no longer a marble, and
-//! a finite but astronomical coordinate would make a step's searches span more cells than
-//! memory holds. Everything inside the range steps in bounded time.
+//! **Supported range.** Positions within [`MAX_COORDINATE`] of the origin, speeds up to
+//! [`MAX_SPEED`] and board spins up to [`MAX_BOARD_SPIN`]: f32 resolves 6 cm at 10⁶ m,
+//! where a marble is no longer a marble, a finite but astronomical coordinate would make a
+//! step's searches span more cells than memory holds, and a board turning thousands of
+//! turns in a step makes continuous collision against it crawl. Everything inside the range
+//! steps in bounded time.
 
 use bevy_ecs::prelude::*;
 use glam::{Quat, Vec3};
@@ -28,6 +30,10 @@ use crate::components::{
 pub const MAX_COORDINATE: f32 = 1e6;
 /// Largest supported speed of a marble or board (and spin times radius), m/s.
 pub const MAX_SPEED: f32 = 1e5;
+/// Largest supported angular speed of a board about each axis, rad/s (1,600 turns a
+/// second). Continuous collision against a turning board advances in steps bounded by its
+/// turn; at 10⁷ rad/s a single marble's step took minutes.
+pub const MAX_BOARD_SPIN: f32 = 1e4;
 
 /// A component value the engine refuses: `{component} must be {rule}, got {value}`.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -104,6 +110,7 @@ fn non_negative(component: &'static str, x: f32) -> Result<(), InvalidValue> {
 
 const POSITION_RULE: &str = "finite, each coordinate within 1e6 m";
 const SPEED_RULE: &str = "finite, each coordinate within 1e5 m/s";
+const BOARD_SPIN_RULE: &str = "finite, each coordinate within 1e4 rad/s (a board's)";
 
 impl Position {
     /// A position, refused unless finite and within [`MAX_COORDINATE`].
@@ -288,7 +295,8 @@ impl<'a> MarbleValues<'a> {
     }
 }
 
-/// A board's pose, motion and material: the first bad value, if any.
+/// A board's pose, motion and material: the first bad value, if any (a board's spin
+/// within [`MAX_BOARD_SPIN`]).
 pub(crate) fn check_board(
     (position, rotation, velocity, spin): (&Position, &Rotation, &Velocity, &AngularVelocity),
     restitution: &Restitution,
@@ -297,7 +305,7 @@ pub(crate) fn check_board(
     Position::new(position.0)?;
     Rotation::new(rotation.0)?;
     Velocity::new(velocity.0)?;
-    AngularVelocity::new(spin.0)?;
+    within("AngularVelocity", spin.0, MAX_BOARD_SPIN, BOARD_SPIN_RULE)?;
     Restitution::new(restitution.0)?;
     Friction::new(friction.0)?;
     Ok(())

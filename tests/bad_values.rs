@@ -8,7 +8,7 @@ use bevy_ecs::message::Messages;
 use bevy_marble::components::{RollingResistance, SpinDamping};
 use bevy_marble::prelude::*;
 use bevy_marble::scenes;
-use bevy_marble::validate::{MAX_COORDINATE, MAX_SPEED};
+use bevy_marble::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_SPEED};
 use glam::Vec3;
 
 /// A drop onto a floor and a second marble beside it, stepped once.
@@ -241,6 +241,33 @@ fn scene_files_refuse_coordinates_out_of_range() {
             .to_string()
             .starts_with("boards[0].position")
     );
+}
+
+/// A board spinning faster than the supported 1e4 rad/s: refused in a scene file, naming
+/// the field (exactly 1e4 accepted), and quarantined when a program sets it later, with a
+/// report naming it. Continuous collision against a board turning at 1e7
+/// rad/s made 30 steps of one marble take minutes (a fuzzing finding, kept in the corpus).
+#[test]
+fn a_board_spinning_past_the_supported_range_is_refused() {
+    let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
+    scene.boards[0].angular_velocity = [MAX_BOARD_SPIN, 0.0, -MAX_BOARD_SPIN];
+    assert!(scene.validate().is_ok());
+    scene.boards[0].angular_velocity = [1e7, 0.0, 0.0];
+    let err = scene.validate().unwrap_err().to_string();
+    assert!(
+        err.starts_with(
+            "boards[0].angular_velocity must be within 1e4 rad/s in each coordinate, got [10000000.0"
+        ),
+        "{err}"
+    );
+    let mut sim = world();
+    let floor = sim.boards()[0];
+    let above = f32::from_bits(MAX_BOARD_SPIN.to_bits() + 1);
+    sim.world_mut().get_mut::<AngularVelocity>(floor).unwrap().0 = Vec3::new(0.0, above, 0.0);
+    let r = step(&mut sim, 1);
+    assert!(sim.world().get::<Quarantined>(floor).is_some());
+    assert_eq!(r[0].entity, floor);
+    assert_eq!(r[0].reason.component, "AngularVelocity");
 }
 
 /// In a Bevy app: a system of the game sets a restitution of 2 in `Update`; the marble is

@@ -67,12 +67,14 @@ pub(super) const FORWARD: [IVec3; 13] = [
 ];
 
 /// The cell of point `p` for cells of size `1 / inv`: `floor(p · inv)` per axis, without
-/// a call to libm's `floorf` (baseline x86-64 has no rounding instruction).
+/// a call to libm's `floorf` (baseline x86-64 has no rounding instruction). Cells past
+/// `i32`'s range (a point 10⁶ m out with micrometre cells) saturate to its ends: the cells
+/// there hold more marbles, but every pair is still found.
 #[inline]
 pub(super) fn cell_of(p: Vec3, inv: f32) -> IVec3 {
     let q = p * inv;
     let t = q.as_ivec3();
-    t - IVec3::from(t.as_vec3().cmpgt(q))
+    t.saturating_sub(IVec3::from(t.as_vec3().cmpgt(q)))
 }
 
 #[inline]
@@ -121,10 +123,10 @@ impl Grid {
             lo = lo.min(c);
             hi = hi.max(c);
         }
-        let dims = (hi - lo).as_i64vec3() + glam::I64Vec3::splat(3);
+        let dims = hi.as_i64vec3() - lo.as_i64vec3() + glam::I64Vec3::splat(3);
         let cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
         let table = if cells <= 8 * n as i64 + 64 {
-            self.dense = Some((lo - IVec3::ONE, dims.as_ivec3()));
+            self.dense = Some((lo.saturating_sub(IVec3::ONE), dims.as_ivec3()));
             cells as usize
         } else {
             self.dense = None;
@@ -175,7 +177,7 @@ impl Grid {
     fn bucket_of(&self, c: IVec3) -> usize {
         match self.dense {
             Some((lo, dims)) => {
-                let d = c - lo;
+                let d = c.saturating_sub(lo);
                 if d.cmplt(IVec3::ZERO).any() || d.cmpge(dims).any() {
                     0
                 } else {
@@ -204,7 +206,7 @@ impl Grid {
         let inv = 1.0 / self.cell;
         let lo = cell_of(s.truncate() - Vec3::splat(s.w + half), inv);
         let hi = cell_of(s.truncate() + Vec3::splat(s.w + half), inv);
-        let span = (hi - lo + IVec3::ONE).as_vec3();
+        let span = (hi.as_vec3() - lo.as_vec3()) + Vec3::ONE;
         if (span.x * span.y * span.z) as f64 > self.order.len() as f64 {
             for q in 0..self.order.len() {
                 if near(self.bounds[q]) {
