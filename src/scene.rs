@@ -14,7 +14,7 @@ use thiserror::Error;
 
 use crate::config::{Integrator, Preset, Sleep, StepConfig};
 use crate::geometry::{BoardGeometry, PartShape};
-use crate::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_SPEED};
+use crate::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_GRAVITY, MAX_SPEED};
 
 /// Why a scene could not be loaded or used. Each is the user's input at fault.
 #[derive(Debug, Error)]
@@ -389,7 +389,7 @@ impl Scene {
 
     /// Checks every value; the first offence is returned with its field path.
     pub fn validate(&self) -> Result<(), SceneError> {
-        finite3("gravity", self.gravity)?;
+        in_range("gravity", self.gravity, MAX_GRAVITY, GRAVITY_RANGE)?;
         positive("dt", self.dt)?;
         if self.substeps < 1 {
             return invalid("substeps", ">= 1", self.substeps);
@@ -764,6 +764,7 @@ fn finite(field: impl FieldName, x: f32) -> Result<(), SceneError> {
 const POSITION_RANGE: &str = "within 1e6 m of the origin in each coordinate";
 const SPEED_RANGE: &str = "within 1e5 m/s in each coordinate";
 const BOARD_SPIN_RANGE: &str = "within 1e4 rad/s in each coordinate";
+const GRAVITY_RANGE: &str = "within 1e4 m/s² in each coordinate";
 
 /// Finite, with every coordinate within `max`.
 fn in_range(field: impl FieldName, v: [f32; 3], max: f32, rule: &str) -> Result<(), SceneError> {

@@ -12,7 +12,8 @@
 //! like) tell a program at once.
 //!
 //! **Supported range.** Positions within [`MAX_COORDINATE`] of the origin, speeds up to
-//! [`MAX_SPEED`] and board spins up to [`MAX_BOARD_SPIN`]: f32 resolves 6 cm at 10⁶ m,
+//! [`MAX_SPEED`], board spins up to [`MAX_BOARD_SPIN`] and gravity up to [`MAX_GRAVITY`]:
+//! f32 resolves 6 cm at 10⁶ m,
 //! where a marble is no longer a marble, a finite but astronomical coordinate would make a
 //! step's searches span more cells than memory holds, and a board turning thousands of
 //! turns in a step makes continuous collision against it crawl. Everything inside the range
@@ -34,6 +35,10 @@ pub const MAX_SPEED: f32 = 1e5;
 /// second). Continuous collision against a turning board advances in steps bounded by its
 /// turn; at 10⁷ rad/s a single marble's step took minutes.
 pub const MAX_BOARD_SPIN: f32 = 1e4;
+/// Largest supported gravity of a scene file, each coordinate, m/s² (about 1,000 g). A
+/// marble under 10⁷ m/s² leaves the supported speeds within a step, and that step's
+/// marble–board response took minutes (a fuzzing finding).
+pub const MAX_GRAVITY: f32 = 1e4;
 
 /// A component value the engine refuses: `{component} must be {rule}, got {value}`.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

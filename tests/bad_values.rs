@@ -8,7 +8,7 @@ use bevy_ecs::message::Messages;
 use bevy_marble::components::{RollingResistance, SpinDamping};
 use bevy_marble::prelude::*;
 use bevy_marble::scenes;
-use bevy_marble::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_SPEED};
+use bevy_marble::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_GRAVITY, MAX_SPEED};
 use glam::Vec3;
 
 /// A drop onto a floor and a second marble beside it, stepped once.
@@ -243,12 +243,13 @@ fn scene_files_refuse_coordinates_out_of_range() {
     );
 }
 
-/// A board spinning faster than the supported 1e4 rad/s: refused in a scene file, naming
+/// A board spinning faster than the supported 1e4 rad/s, or a gravity past 1e4 m/s²: refused
+/// in a scene file, naming
 /// the field (exactly 1e4 accepted), and quarantined when a program sets it later, with a
 /// report naming it. Continuous collision against a board turning at 1e7
 /// rad/s made 30 steps of one marble take minutes (a fuzzing finding, kept in the corpus).
 #[test]
-fn a_board_spinning_past_the_supported_range_is_refused() {
+fn a_board_spin_or_gravity_past_the_supported_range_is_refused() {
     let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
     scene.boards[0].angular_velocity = [MAX_BOARD_SPIN, 0.0, -MAX_BOARD_SPIN];
     assert!(scene.validate().is_ok());
@@ -258,6 +259,17 @@ fn a_board_spinning_past_the_supported_range_is_refused() {
         err.starts_with(
             "boards[0].angular_velocity must be within 1e4 rad/s in each coordinate, got [10000000.0"
         ),
+        "{err}"
+    );
+    // Gravity likewise (a marble under 1e7 m/s² leaves the supported speeds within a step,
+    // whose response took minutes: another fuzzing finding).
+    let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
+    scene.gravity = [0.0, -MAX_GRAVITY, MAX_GRAVITY];
+    assert!(scene.validate().is_ok());
+    scene.gravity = [0.0, 1e7, 0.0];
+    let err = scene.validate().unwrap_err().to_string();
+    assert!(
+        err.starts_with("gravity must be within 1e4 m/s² in each coordinate, got [0.0, 10000000.0"),
         "{err}"
     );
     let mut sim = world();
