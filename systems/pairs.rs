@@ -338,8 +338,15 @@ pub fn pair_impacts(
             spins: false,
             mu: 0.0,
         });
-        // Where the marble would have got without its boards, and when one first changed
-        // its path (a touch found after the substep's start).
+    }
+    if !solver.find_impacts(&params) {
+        return;
+    }
+    // 3. Every marble's board contacts of this substep; where it would have got without
+    // its boards, and when one first changed its path (a touch found after the substep's
+    // start).
+    solver.begin_board_touches();
+    for (body, m) in (0usize..).zip(&marbles) {
         let after = m
             .contacts
             .iter()
@@ -350,13 +357,6 @@ pub fn pair_impacts(
             .integrator
             .delta(m.start.velocity, m.acceleration.0, h);
         solver.push_free_end(after, m.start.position + dx, m.start.velocity + dv);
-    }
-    if !solver.find_impacts(&params) {
-        return;
-    }
-    // 3. Every marble's board contacts of this substep.
-    solver.begin_board_touches();
-    for (body, m) in (0usize..).zip(&marbles) {
         board_touches(
             solver,
             &cache,

@@ -401,7 +401,7 @@ impl PairSolver {
         self.free_ends.clear();
     }
 
-    /// Phase 2 of the impact stage, after each [`PairSolver::push_body`]: that marble's
+    /// Phase 3 of the impact stage, once deep impacts were found, for each body in order: its
     /// free path over the substep ends at `x` with velocity `v` (where it would be had no
     /// board touched it), and the first board event of its substep (a collision, or a
     /// landing, after its start) was at `after` s (`f32::INFINITY`: none). A marble that
