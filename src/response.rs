@@ -57,7 +57,10 @@
 //!   exact moment (`2 v0 / (7 μ g)` for a marble launched without spin);
 //! - rolling resistance `c` is a torque `c N r` against the rolling spin (a rolling marble
 //!   then decelerates at `(5/7) c g`) and spin damping `k` a torque `k N r` against the spin
-//!   about the normal; both are opt-in (default 0).
+//!   about the normal; both are opt-in (default 0). A spin whose tangential part is at rest
+//!   meets a static resistance (`held_spin`): any torque up to `c N r` that keeps it at
+//!   rest, else `c N r` against its start, so a marble stays on an incline with
+//!   `tan θ ≤ c`.
 //!
 //! The forces are constant over each stretch between events, so the exact-parabola path
 //! and the spin `ω + α τ` stay exact there. On a turning board the slip also changes with
@@ -75,7 +78,13 @@
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever finishes the substep as without continuous collision: its
-//! free path, then the end-of-substep check.
+//! free path, then the end-of-substep check. So is the count of friction events
+//! ([`MAX_FRICTION_EVENTS`]): a touch changes regime a few times in a substep at most (a
+//! slip that stops, a spin that stops), so a marble past the bound is chattering between
+//! regimes (a rolling resistance so strong that a spin it stops is restarted by the
+//! friction of a turning board, stopped again a picosecond later, and so on, in steps
+//! below the resolution of `t`); it finishes the substep without friction, its spin
+//! held and its constraints kept, which can only remove the chatter's work.
 //!
 //! [`StepConfig::max_impacts`]: crate::config::StepConfig::max_impacts
 
@@ -146,6 +155,10 @@ pub enum Found {
     /// No touch at the start; overlap at the end of the free path (`ccd` off).
     Overlap,
 }
+
+/// Most friction events (a slip or a spin that stops) per marble per substep; past it the
+/// substep ends without friction (module docs).
+pub const MAX_FRICTION_EVENTS: u32 = 16;
 
 /// A marble's state inside the event loop.
 #[derive(Clone, Copy, Debug)]
@@ -229,6 +242,8 @@ fn resolve_with<const SPINS: bool>(
         r: m.r,
     };
     let mut impacts = 0;
+    // Friction events so far; past `MAX_FRICTION_EVENTS` the touches are frictionless.
+    let mut friction_events = 0;
     contacts.clear();
     // Whether the end-of-substep check can be skipped: see below.
     let mut settled_start = matches!(found, Found::Touching);
@@ -248,7 +263,11 @@ fn resolve_with<const SPINS: bool>(
 
     // An impact at `t` along the path: the touches there, their response, and the motion
     // they leave.
-    let at_impact = |t: f32, s: &mut State, touches: &mut TouchList, contacts: &mut Contacts| {
+    let at_impact = |t: f32,
+                     s: &mut State,
+                     touches: &mut TouchList,
+                     contacts: &mut Contacts,
+                     friction: bool| {
         regather(t, s, touches);
         respond::<SPINS>(
             touches.as_slice(),
@@ -260,7 +279,7 @@ fn resolve_with<const SPINS: bool>(
             m.a,
             contacts,
         );
-        settle::<SPINS>(touches.as_slice(), s, m.a, sep, false, 0.0)
+        settle_with::<SPINS>(touches.as_slice(), s, m.a, sep, false, 0.0, friction)
     };
 
     // From here on `s.v` is the path velocity (see `Integrator`), and `motion` the
@@ -293,7 +312,7 @@ fn resolve_with<const SPINS: bool>(
             advance::<SPINS>(&mut s, &free(m.a), tau);
             t = tau;
             impacts = 1;
-            at_impact(t, &mut s, touches, contacts)
+            at_impact(t, &mut s, touches, contacts, true)
         }
         Found::Overlap => {
             s.v += offset(m.a);
@@ -323,7 +342,8 @@ fn resolve_with<const SPINS: bool>(
                 t += tau;
                 settled_start = false;
                 impacts += 1;
-                motion = at_impact(t, &mut s, touches, contacts);
+                let friction = friction_events < MAX_FRICTION_EVENTS;
+                motion = at_impact(t, &mut s, touches, contacts, friction);
                 continue;
             }
         }
@@ -331,8 +351,11 @@ fn resolve_with<const SPINS: bool>(
         if slip_event {
             t += reach;
             settled_start = false;
+            friction_events += 1;
+            let friction = friction_events < MAX_FRICTION_EVENTS;
             regather(t, &s, touches);
-            motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0);
+            motion =
+                settle_with::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0, friction);
             continue;
         }
         t = p.h;
@@ -357,11 +380,8 @@ fn resolve_with<const SPINS: bool>(
                 && motion.a.dot(tc.normal) >= 0.0
         })
     {
-        return MarbleOut {
-            d: s.d,
-            v: s.v - offset(motion.a),
-            w: s.w - offset(motion.alpha),
-        };
+        let (v, w) = reported::<SPINS>(touches.as_slice(), &s, m.a, sep, motion, motion, p);
+        return MarbleOut { d: s.d, v, w };
     }
 
     // End of substep: resolve what still overlaps, or touches while approaching.
@@ -434,7 +454,8 @@ fn resolve_with<const SPINS: bool>(
     }
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
-    let end = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0);
+    let friction = friction_events < MAX_FRICTION_EVENTS;
+    let end = settle_with::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0, friction);
     if settled_start
         && t >= p.h
         && matches!(p.integrator, Integrator::VelocityVerlet | Integrator::Rk4)
@@ -463,10 +484,43 @@ fn resolve_with<const SPINS: bool>(
             s.w += 0.5 * p.h * (end.alpha - motion.alpha);
         }
     }
-    MarbleOut {
-        d: s.d,
-        v: s.v - offset(end.a),
-        w: s.w - offset(end.alpha),
+    let (v, w) = reported::<SPINS>(touches.as_slice(), &s, m.a, sep, end, motion, p);
+    MarbleOut { d: s.d, v, w }
+}
+
+/// From the path's velocity and spin at the substep's end back to the integrator's
+/// reported ones, the converse of [`lead_in`]: `lead` seconds before the path's for
+/// semi-implicit Euler, whose path leads, and `−lead` after them for explicit Euler, whose
+/// path lags, under the end's accelerations `motion`. Where those would stop a slip or a
+/// spin within the `lead` seconds (a friction event), extrapolating them across it would
+/// report by as much as their rate times `h/2`: reversed going forward, grown going back
+/// (a marble whose huge rolling resistance the turning of its board's normal restarts at
+/// the end reported spinning at 10⁸ rad/s, and the next substep's rounding of that number
+/// left in its spin). So going forward the regime changes at the event as in the event
+/// loop, and going back the reported state follows the accelerations of the path's own
+/// last stretch, `last`.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+fn reported<const SPINS: bool>(
+    list: &[Touch],
+    s: &State,
+    a: Vec3,
+    sep: f32,
+    motion: Motion,
+    last: Motion,
+    p: &SubstepParams,
+) -> (Vec3, Vec3) {
+    let lead = p.integrator.velocity_lead(p.h);
+    let event_within = SPINS && motion.slip_stops.is_some_and(|ts| ts < lead.abs());
+    let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
+    if event_within && lead < 0.0 {
+        let mut e = *s;
+        lead_in(list, &mut e, a, sep, motion, -lead);
+        (e.v, e.w)
+    } else if event_within {
+        (s.v - offset(last.a), s.w - offset(last.alpha))
+    } else {
+        (s.v - offset(motion.a), s.w - offset(motion.alpha))
     }
 }
 
@@ -593,7 +647,7 @@ pub fn resolve_rolling(
     if let Some(ts) = motion.slip_stops {
         // `lead_in` without an event in the lead, and none in the substep after it.
         let after = ts - lead;
-        if (lead > 0.0 && ts < lead) || after < p.h {
+        if (lead > 0.0 && ts < lead) || after < p.h + (-lead).max(0.0) {
             return None;
         }
         motion.slip_stops = Some(after);
@@ -803,6 +857,25 @@ fn respond_on<const SPINS: bool, const TURNING: bool>(
     }
 }
 
+/// [`settle`] with friction, or (`friction` false: past [`MAX_FRICTION_EVENTS`]) with the
+/// constraints alone, the spin held.
+#[inline]
+fn settle_with<const SPINS: bool>(
+    list: &[Touch],
+    s: &mut State,
+    a: Vec3,
+    sep: f32,
+    overlap: bool,
+    lag: f32,
+    friction: bool,
+) -> Motion {
+    if friction {
+        settle::<SPINS>(list, s, a, sep, overlap, lag)
+    } else {
+        settle::<false>(list, s, a, sep, overlap, lag)
+    }
+}
+
 /// Step 3 of the module docs: for every touch the marble is not leaving (normal speed
 /// relative to the board within `sep`), the marble is put on the surface (it is within the
 /// touching tolerance, so this moves it by less than that; with `overlap`, at the
@@ -980,6 +1053,10 @@ fn friction<const TURNING: bool>(
         let lagged = lag * board_slip_rate(s, tc);
         slip += lagged - lagged.dot(n) * n;
     }
+    if rr > 0.0 && !rolling_spin {
+        held_spin::<TURNING>(s, tc, nf, slip, rr, alpha, motion);
+        return;
+    }
     let f = if slip.length() <= ROLLING_SLIP {
         // Rolling: remove the residual slip (rounding), then hold it at zero with static
         // friction if Coulomb allows.
@@ -1012,6 +1089,83 @@ fn friction<const TURNING: bool>(
     }
     motion.a += f;
     motion.alpha += alpha;
+}
+
+/// [`friction`] for a touch with rolling resistance whose marble's spin has no tangential
+/// part: the resistance is then static, like friction on a contact point at rest. It
+/// supplies whatever tangential torque, up to its `c N r`, keeps the spin at rest against
+/// the other torques (friction's among them), and when that is not enough the spin starts
+/// against the full `c N r`, from the first instant. Without this the spin would start
+/// unopposed and be stopped again an instant later, every substep: a marble creeping down
+/// an incline the resistance holds (`tan θ ≤ c`), and with `c > μ` a chatter of events.
+/// `rr` is the resistance's angular acceleration `(5/2) c N / r`; `alpha` this touch's
+/// angular acceleration so far (the spin damping's, along the normal).
+fn held_spin<const TURNING: bool>(
+    s: &mut State,
+    tc: &Touch,
+    nf: f32,
+    slip: Vec3,
+    rr: f32,
+    alpha: Vec3,
+    motion: &mut Motion,
+) {
+    let n = tc.normal;
+    let r = s.r;
+    let rc = -r * n;
+    let cap = tc.material.friction * nf;
+    let tangential = |x: Vec3| x - x.dot(n) * n;
+    let board = if TURNING && tc.board_spin != Vec3::ZERO {
+        board_slip_rate(s, tc)
+    } else {
+        Vec3::ZERO
+    };
+    // The tangential angular acceleration the other torques and a friction `f` drive,
+    // and the resistance's answer to it: all of it up to `rr`, else `rr` against it.
+    let other = tangential(motion.alpha + alpha);
+    let drive = |f: Vec3| other + (-2.5 / r) * n.cross(f);
+    let resist = |d: Vec3| {
+        let m = d.length();
+        if m <= rr { -d } else { d * (-rr / m) }
+    };
+    let capped = |f: Vec3| {
+        let m = f.length();
+        if m <= cap { f } else { f * (cap / m) }
+    };
+    let (f, alpha_rr) = if slip.length() <= ROLLING_SLIP {
+        // The contact point and the spin both at rest: the rounding residue of the slip
+        // goes from the velocity (the spin stays at rest), then friction holds the contact
+        // point with the spin held, `f = −a_t`, if Coulomb allows.
+        s.v -= slip;
+        let f = capped(-tangential(motion.a - board));
+        let d = drive(f);
+        if d.length() <= rr {
+            (f, -d)
+        } else {
+            // The resistance cannot hold the spin: the marble rolls, the resistance at
+            // `rr` against the spin's start, static friction as for any rolling marble.
+            let alpha_rr = d * (-rr / d.length());
+            let a_c = tangential(motion.a + (motion.alpha + alpha + alpha_rr).cross(rc) - board);
+            (capped(-(2.0 / 7.0) * a_c), alpha_rr)
+        }
+    } else {
+        let dir = slip.normalize();
+        let f = -cap * dir;
+        let alpha_rr = resist(drive(f));
+        // The slip changes at the contact point's acceleration: `a + f`, plus the spin's
+        // part, `α × (−r n)`, with `α` this touch's (the friction's `(5/2) f` held back
+        // by the resistance) and the others'.
+        let alpha_f = (-2.5 / r) * n.cross(f);
+        let a_c = tangential(
+            motion.a + f + (motion.alpha + alpha + alpha_rr + alpha_f).cross(rc) - board,
+        );
+        let rate = a_c.dot(dir);
+        if rate < 0.0 {
+            stop_at(motion, slip.length() / -rate);
+        }
+        (f, alpha_rr)
+    };
+    motion.a += f;
+    motion.alpha += alpha + alpha_rr + (-2.5 / r) * n.cross(f);
 }
 
 /// What a turning board adds to the rate of change of the slip (module docs, "Rolling"):

@@ -194,6 +194,80 @@ fn rolling_resistance_decelerates_at_five_sevenths_c_g() {
     }
 }
 
+/// On an incline of slope `tan θ = c / 2` with rolling resistance `c = 0.05` (marble and
+/// board) a marble left at rest stays at rest: holding it needs a friction `g sin θ` up
+/// the slope, whose torque `g sin θ · r` the resistance cancels up to `c g cos θ · r`
+/// (it holds for `tan θ ≤ c`). For every integrator at dt = 1/240 and 1/60, over 2 s:
+/// it moves less than 1e-6 m and never faster than 1e-6 m/s (f32 rounding of the
+/// cancelled acceleration, a few ulps of g over at most 480 steps).
+#[test]
+fn rolling_resistance_holds_a_marble_on_a_shallow_incline() {
+    let c = 0.05f32;
+    let theta = (0.5 * c).atan();
+    let rot = Quat::from_rotation_z(theta);
+    let n = rot * Vec3::Y;
+    for integrator in Integrator::ALL {
+        for dt in [1.0f32 / 240.0, 1.0 / 60.0] {
+            let mut board = plane(rot, 0.5);
+            board.rolling_resistance = c;
+            let start = n * R;
+            let mut m = marble(start, Vec3::ZERO, Vec3::ZERO, 0.5);
+            m.rolling_resistance = c;
+            let steps = (2.0f32 / dt).round() as usize;
+            let traj = run(&rolling_scene(dt, integrator, vec![board], vec![m]), steps);
+            let moved = (traj[steps].0 - start).length();
+            let fastest = traj.iter().map(|(_, v, _)| v.length()).fold(0.0, f32::max);
+            println!("{integrator:?} dt={dt}: moved {moved:e} m, fastest {fastest:e} m/s");
+            assert!(
+                moved <= 1e-6 && fastest <= 1e-6,
+                "{integrator:?} dt={dt}: moved {moved} m, fastest {fastest} m/s"
+            );
+        }
+    }
+}
+
+/// Down an incline of slope `tan θ = 2c` with rolling resistance `c = 0.05`, from rest: the
+/// resistance's torque `c N r` stands against the roll from the first instant, so the
+/// marble rolls at `a = (5/7) g (sin θ − c cos θ)`, for every integrator at dt = 1/240 and
+/// 1/60: each integrator's `s = ½ a t² + λ a t` (as in [`rolls_down_an_incline`]) to 1e-4
+/// relative after 2 s, rolling (slip ≤ 1e-6 m/s) at every step.
+#[test]
+fn rolls_down_an_incline_against_rolling_resistance() {
+    let c = 0.05f32;
+    let theta = (2.0 * c).atan();
+    let rot = Quat::from_rotation_z(theta);
+    let n = rot * Vec3::Y;
+    let down = rot * -Vec3::X;
+    let a = 5.0 / 7.0 * G * (theta.sin() - c * theta.cos());
+    for integrator in Integrator::ALL {
+        for dt in [1.0f32 / 240.0, 1.0 / 60.0] {
+            let mut board = plane(rot, 0.5);
+            board.rolling_resistance = c;
+            let start = n * R;
+            let mut m = marble(start, Vec3::ZERO, Vec3::ZERO, 0.5);
+            m.rolling_resistance = c;
+            let steps = (2.0f32 / dt).round() as usize;
+            let traj = run(&rolling_scene(dt, integrator, vec![board], vec![m]), steps);
+            let t = steps as f32 * dt;
+            let s = (traj[steps].0 - start).dot(down);
+            let want = 0.5 * a * t * t + integrator.velocity_lead(dt) * a * t;
+            let err = ((s - want) / want).abs();
+            println!("{integrator:?} dt={dt}: incline error {err:e}");
+            assert!(
+                err <= 1e-4,
+                "{integrator:?} dt={dt}: s = {s}, want {want}, error {err}"
+            );
+            for (i, (_, v, w)) in traj.iter().enumerate() {
+                assert!(
+                    slip(*v, *w, n).length() <= 1e-6,
+                    "{integrator:?} dt={dt} step {i}: slipping at {}",
+                    slip(*v, *w, n).length()
+                );
+            }
+        }
+    }
+}
+
 /// An oblique impact with friction puts spin on the marble: hitting the floor at
 /// (2, −3) m/s with e = 0.5 and μ = 0.5, the tangential impulse that stops the slip,
 /// −(2/7)·2 m/s, is within Coulomb's μ·(1 + e)·3 m/s, so the marble leaves rolling:
