@@ -125,7 +125,9 @@ impl Grid {
         }
         let dims = hi.as_i64vec3() - lo.as_i64vec3() + glam::I64Vec3::splat(3);
         let cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
-        let table = if cells <= 8 * n as i64 + 64 {
+        // (No ordinary body at all, as when every bound is NaN, leaves `lo` above `hi`:
+        // no span, so the hashed table.)
+        let table = if lo.cmple(hi).all() && cells <= 8 * n as i64 + 64 {
             self.dense = Some((lo.saturating_sub(IVec3::ONE), dims.as_ivec3()));
             cells as usize
         } else {
