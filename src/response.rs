@@ -1061,13 +1061,7 @@ fn friction<const TURNING: bool>(
         // Rolling: remove the residual slip (rounding), then hold it at zero with static
         // friction if Coulomb allows.
         push_tangential(s, n, -(2.0 / 7.0) * slip);
-        let f = -(2.0 / 7.0) * a_c;
-        let cap = mu * nf;
-        if f.length() <= cap {
-            f
-        } else {
-            f * (cap / f.length())
-        }
+        capped(-(2.0 / 7.0) * a_c, mu * nf)
     } else {
         let dir = slip.normalize();
         let f = -mu * nf * dir;
@@ -1123,34 +1117,26 @@ fn held_spin<const TURNING: bool>(
     // and the resistance's answer to it: all of it up to `rr`, else `rr` against it.
     let other = tangential(motion.alpha + alpha);
     let drive = |f: Vec3| other + (-2.5 / r) * n.cross(f);
-    let resist = |d: Vec3| {
-        let m = d.length();
-        if m <= rr { -d } else { d * (-rr / m) }
-    };
-    let capped = |f: Vec3| {
-        let m = f.length();
-        if m <= cap { f } else { f * (cap / m) }
-    };
     let (f, alpha_rr) = if slip.length() <= ROLLING_SLIP {
         // The contact point and the spin both at rest: the rounding residue of the slip
         // goes from the velocity (the spin stays at rest), then friction holds the contact
         // point with the spin held, `f = −a_t`, if Coulomb allows.
         s.v -= slip;
-        let f = capped(-tangential(motion.a - board));
+        let f = capped(-tangential(motion.a - board), cap);
         let d = drive(f);
+        let alpha_rr = capped(-d, rr);
         if d.length() <= rr {
-            (f, -d)
+            (f, alpha_rr)
         } else {
             // The resistance cannot hold the spin: the marble rolls, the resistance at
             // `rr` against the spin's start, static friction as for any rolling marble.
-            let alpha_rr = d * (-rr / d.length());
             let a_c = tangential(motion.a + (motion.alpha + alpha + alpha_rr).cross(rc) - board);
-            (capped(-(2.0 / 7.0) * a_c), alpha_rr)
+            (capped(-(2.0 / 7.0) * a_c, cap), alpha_rr)
         }
     } else {
         let dir = slip.normalize();
         let f = -cap * dir;
-        let alpha_rr = resist(drive(f));
+        let alpha_rr = capped(-drive(f), rr);
         // The slip changes at the contact point's acceleration: `a + f`, plus the spin's
         // part, `α × (−r n)`, with `α` this touch's (the friction's `(5/2) f` held back
         // by the resistance) and the others'.
@@ -1166,6 +1152,15 @@ fn held_spin<const TURNING: bool>(
     };
     motion.a += f;
     motion.alpha += alpha + alpha_rr + (-2.5 / r) * n.cross(f);
+}
+
+/// `x`, scaled down to length `max` if it is longer: a static force or torque that supplies
+/// what is asked of it up to its Coulomb-like bound (friction's `μ N`, rolling
+/// resistance's `c N r`).
+#[inline]
+fn capped(x: Vec3, max: f32) -> Vec3 {
+    let m = x.length();
+    if m <= max { x } else { x * (max / m) }
 }
 
 /// What a turning board adds to the rate of change of the slip (module docs, "Rolling"):

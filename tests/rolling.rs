@@ -64,48 +64,53 @@ fn slip(v: Vec3, w: Vec3, n: Vec3) -> Vec3 {
     v + w.cross(-R * n)
 }
 
-/// Down a 20° incline from rest (μ = 0.5 ≥ (2/7) tan 20° = 0.10, so it rolls without
-/// slipping) at `a = (5/7) g sinθ`, for every integrator at dt = 1/240 and 1/60: each
-/// integrator's closed form `s = ½ a t² + λ a t`, where `λ` is how far its path leads
-/// its reported velocity (`Integrator::velocity_lead`: 0 for Verlet and RK4, ±dt/2 for
-/// the Euler schemes), to 1e-4 relative after 1 s (f32 summation over at most 240 steps),
-/// with `ω r = v` in what every step reports (slip ≤ 1e-6 m/s).
-#[test]
-fn rolls_down_an_incline() {
-    let theta = 20f32.to_radians();
+/// A marble released at rest on an incline of angle `theta` (μ = 0.5 on both, rolling
+/// resistance `c` on both) for `seconds`, for every integrator at dt = 1/240 and 1/60:
+/// it must roll without slipping (slip ≤ 1e-6 m/s in what every step reports) at
+/// `a = (5/7) g (sin θ − c cos θ)`, each integrator's closed form `s = ½ a t² + λ a t`,
+/// where `λ` is how far its path leads its reported velocity (`Integrator::velocity_lead`:
+/// 0 for Verlet and RK4, ±dt/2 for the Euler schemes), to 1e-4 relative (f32 summation
+/// over at most 480 steps).
+fn assert_rolls_down(theta: f32, c: f32, seconds: f32) {
     let rot = Quat::from_rotation_z(theta);
     let n = rot * Vec3::Y;
     let down = rot * -Vec3::X;
-    let a = 5.0 / 7.0 * G * theta.sin();
+    let a = 5.0 / 7.0 * G * (theta.sin() - c * theta.cos());
     for integrator in Integrator::ALL {
-        for dt in [1.0 / 240.0, 1.0 / 60.0] {
+        for dt in [1.0f32 / 240.0, 1.0 / 60.0] {
+            let mut board = plane(rot, 0.5);
+            board.rolling_resistance = c;
             let start = n * R;
-            let scene = rolling_scene(
-                dt,
-                integrator,
-                vec![plane(rot, 0.5)],
-                vec![marble(start, Vec3::ZERO, Vec3::ZERO, 0.5)],
-            );
-            let steps = (1.0 / dt).round() as usize;
-            let traj = run(&scene, steps);
+            let mut m = marble(start, Vec3::ZERO, Vec3::ZERO, 0.5);
+            m.rolling_resistance = c;
+            let steps = (seconds / dt).round() as usize;
+            let traj = run(&rolling_scene(dt, integrator, vec![board], vec![m]), steps);
             let t = steps as f32 * dt;
             let s = (traj[steps].0 - start).dot(down);
             let want = 0.5 * a * t * t + integrator.velocity_lead(dt) * a * t;
             let err = ((s - want) / want).abs();
-            println!("{integrator:?} dt={dt}: incline error {err:e}");
+            println!("{integrator:?} dt={dt} c={c}: incline error {err:e}");
             assert!(
                 err <= 1e-4,
-                "{integrator:?} dt={dt}: s = {s}, want {want}, error {err}"
+                "{integrator:?} dt={dt} c={c}: s = {s}, want {want}, error {err}"
             );
             for (i, (_, v, w)) in traj.iter().enumerate() {
                 assert!(
                     slip(*v, *w, n).length() <= 1e-6,
-                    "{integrator:?} dt={dt} step {i}: slipping at {}",
+                    "{integrator:?} dt={dt} c={c} step {i}: slipping at {}",
                     slip(*v, *w, n).length()
                 );
             }
         }
     }
+}
+
+/// Down a 20° incline from rest for 1 s without rolling resistance (μ = 0.5 ≥
+/// (2/7) tan 20° = 0.10, so it rolls without slipping) at `a = (5/7) g sinθ`
+/// ([`assert_rolls_down`]).
+#[test]
+fn rolls_down_an_incline() {
+    assert_rolls_down(20f32.to_radians(), 0.0, 1.0);
 }
 
 /// Launched at v0 = 2 m/s without spin on a flat board with μ = 0.2 and e = 0: kinetic
@@ -226,46 +231,13 @@ fn rolling_resistance_holds_a_marble_on_a_shallow_incline() {
     }
 }
 
-/// Down an incline of slope `tan θ = 2c` with rolling resistance `c = 0.05`, from rest: the
-/// resistance's torque `c N r` stands against the roll from the first instant, so the
-/// marble rolls at `a = (5/7) g (sin θ − c cos θ)`, for every integrator at dt = 1/240 and
-/// 1/60: each integrator's `s = ½ a t² + λ a t` (as in [`rolls_down_an_incline`]) to 1e-4
-/// relative after 2 s, rolling (slip ≤ 1e-6 m/s) at every step.
+/// Down an incline of slope `tan θ = 2c` with rolling resistance `c = 0.05`, from rest,
+/// for 2 s: the resistance's torque `c N r` stands against the roll from the first
+/// instant, so the marble rolls at `a = (5/7) g (sin θ − c cos θ)` ([`assert_rolls_down`]).
 #[test]
 fn rolls_down_an_incline_against_rolling_resistance() {
     let c = 0.05f32;
-    let theta = (2.0 * c).atan();
-    let rot = Quat::from_rotation_z(theta);
-    let n = rot * Vec3::Y;
-    let down = rot * -Vec3::X;
-    let a = 5.0 / 7.0 * G * (theta.sin() - c * theta.cos());
-    for integrator in Integrator::ALL {
-        for dt in [1.0f32 / 240.0, 1.0 / 60.0] {
-            let mut board = plane(rot, 0.5);
-            board.rolling_resistance = c;
-            let start = n * R;
-            let mut m = marble(start, Vec3::ZERO, Vec3::ZERO, 0.5);
-            m.rolling_resistance = c;
-            let steps = (2.0f32 / dt).round() as usize;
-            let traj = run(&rolling_scene(dt, integrator, vec![board], vec![m]), steps);
-            let t = steps as f32 * dt;
-            let s = (traj[steps].0 - start).dot(down);
-            let want = 0.5 * a * t * t + integrator.velocity_lead(dt) * a * t;
-            let err = ((s - want) / want).abs();
-            println!("{integrator:?} dt={dt}: incline error {err:e}");
-            assert!(
-                err <= 1e-4,
-                "{integrator:?} dt={dt}: s = {s}, want {want}, error {err}"
-            );
-            for (i, (_, v, w)) in traj.iter().enumerate() {
-                assert!(
-                    slip(*v, *w, n).length() <= 1e-6,
-                    "{integrator:?} dt={dt} step {i}: slipping at {}",
-                    slip(*v, *w, n).length()
-                );
-            }
-        }
-    }
+    assert_rolls_down((2.0 * c).atan(), c, 2.0);
 }
 
 /// An oblique impact with friction puts spin on the marble: hitting the floor at
