@@ -540,16 +540,50 @@ pub fn resolve_resting(
     tc: &Touch,
     contacts: &mut Contacts,
 ) -> Option<MarbleOut> {
+    resting::<false>(boards, p, m, tc, contacts)
+}
+
+/// [`resolve_resting`] on a touch whose material does not move (a still board: no
+/// velocity, acceleration or spin at the touch, all exactly zero), inlined in its caller:
+/// the same bits with the board's terms left out (`v − 0` is `v`, and the zero need of a
+/// surface that does not accelerate changes nothing but the sign of a zero), for the
+/// commonest case of all, a marble on a still flat face ([`NearPieces::still_face`]).
+#[inline(always)]
+pub fn resolve_resting_still(
+    boards: &[BoardSnapshot],
+    p: &SubstepParams,
+    m: &MarbleIn,
+    tc: &Touch,
+    contacts: &mut Contacts,
+) -> Option<MarbleOut> {
+    debug_assert!(
+        tc.board_velocity == Vec3::ZERO
+            && tc.board_accel == Vec3::ZERO
+            && tc.board_spin == Vec3::ZERO
+    );
+    resting::<true>(boards, p, m, tc, contacts)
+}
+
+/// [`resolve_resting`], and with `STILL` [`resolve_resting_still`].
+#[inline(always)]
+fn resting<const STILL: bool>(
+    boards: &[BoardSnapshot],
+    p: &SubstepParams,
+    m: &MarbleIn,
+    tc: &Touch,
+    contacts: &mut Contacts,
+) -> Option<MarbleOut> {
     debug_assert!(m.w0.is_none() && tc.convex);
     // `respond`, `settle` and `advance` on one touch, written out: the same operations in
     // the same order (so the same bits, NaN included), without their lists.
     let sep = separation_speed(p.threshold);
-    let (n, vb) = (tc.normal, tc.board_velocity);
+    let n = tc.normal;
+    let relative = |v: Vec3| if STILL { v } else { v - tc.board_velocity };
     let mut v = m.v0;
     let mut d = Vec3::ZERO;
     contacts.clear();
     // Step 2: equation (1) for a collision, the approach removed for a contact.
-    let u = (v - vb).dot(n);
+    let u = relative(v).dot(n);
     let kind = if u < -p.threshold {
         ContactKind::Collision
     } else {
@@ -563,7 +597,7 @@ pub fn resolve_resting(
             0.0
         };
         for _ in 0..4 {
-            let u = (v - vb).dot(n);
+            let u = relative(v).dot(n);
             if u < target {
                 v += (target - u) * n;
             } else {
@@ -572,7 +606,7 @@ pub fn resolve_resting(
         }
     }
     // Step 3: on the surface, no normal speed, no acceleration into it.
-    let u = (v - vb).dot(n);
+    let u = relative(v).dot(n);
     if u <= sep {
         if tc.gap.abs() > 0.0 {
             d -= tc.gap * n;
@@ -581,10 +615,14 @@ pub fn resolve_resting(
     }
     let mut a = m.a;
     for _ in 0..4 {
-        let rel = v - vb;
+        let rel = relative(v);
         let an = if rel.dot(n) <= sep {
-            let need = tc.board_accel.dot(n) - 2.0 * rel.dot(tc.board_spin.cross(n));
-            a.dot(n) - need
+            if STILL {
+                a.dot(n)
+            } else {
+                let need = tc.board_accel.dot(n) - 2.0 * rel.dot(tc.board_spin.cross(n));
+                a.dot(n) - need
+            }
         } else {
             0.0
         };
@@ -600,7 +638,7 @@ pub fn resolve_resting(
     d += v * p.h + a * (0.5 * p.h * p.h);
     v += a * p.h;
     // The event loop's test for skipping its end-of-substep check.
-    let stays = (v - vb).dot(n) <= sep && a.dot(n) >= 0.0;
+    let stays = relative(v).dot(n) <= sep && a.dot(n) >= 0.0;
     stays.then(|| MarbleOut {
         d,
         v: v - offset,

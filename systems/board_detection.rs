@@ -7,14 +7,18 @@ use super::{
     BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped, smooth_material,
 };
 use crate::board_contact::{
-    BoardCache, Material, NearPieces, Path, TouchList, earliest_impact, gather, touch_tolerance,
+    BoardCache, Material, NearPieces, Path, Touch, TouchList, earliest_impact, gather,
+    touch_tolerance,
 };
 use crate::components::{
     Acceleration, AngularVelocity, Contact, ContactKind, Contacts, Pending, Position,
     PositionCarry, StepStart, Velocity, compensated_add,
 };
 use crate::config::{StepConfig, Substep};
-use crate::response::{Found, MarbleIn, SubstepParams, resolve, resolve_resting, resolve_rolling};
+use crate::response::{
+    Found, MarbleIn, SubstepParams, resolve, resolve_resting, resolve_resting_still,
+    resolve_rolling,
+};
 
 /// A rebuilt [`NearPieces`] list reaches this many substeps of the marble's motion beyond
 /// it (within two and eight radii; a marble moving more than four radii a substep gets
@@ -113,6 +117,35 @@ impl<'a> Stage<'a> {
         );
     }
 
+    /// [`NearPieces::still_face`] for a marble that does not spin (`still`: else `None`).
+    #[expect(clippy::too_many_arguments, reason = "a marble's state, handed over")]
+    #[inline(always)]
+    fn still_face(
+        &self,
+        still: bool,
+        near: &NearPieces,
+        start: &StepStart,
+        acceleration: &Acceleration,
+        r: f32,
+        tol: f32,
+        material: &Material,
+    ) -> Option<Touch> {
+        if !still {
+            return None;
+        }
+        near.still_face(
+            &self.cache.boards,
+            self.cache.epoch,
+            start.position,
+            start.velocity,
+            acceleration.0,
+            self.h,
+            r,
+            tol,
+            material,
+        )
+    }
+
     /// One marble's detection (see [`detect_board_contacts`]): its motion state (with its
     /// spin when it carries one), `material` its side of its contacts.
     #[expect(
@@ -142,10 +175,17 @@ impl<'a> Stage<'a> {
         let tol = touch_tolerance(config.contact_tolerance, r, start.position);
         // The spin, when the marble spins (rolling on and an angular velocity).
         let w0 = spin.as_ref().filter(|_| config.rolling).map(|w| w.0);
-        // The board pieces near the marble should cover where it can go this substep
-        // (each query checks that they do, and searches the boards where not).
         let near = near.bypass_change_detection();
-        if !near.is_fresh(cache, start.position, r, start.velocity.length() * h, tol) {
+        // The commonest case of all, a marble that does not spin resting or sliding on a
+        // still flat face with nothing else near, when its list vouches for that as it
+        // stands (after a rebuild, `lone_touch` finds it).
+        let face = self.still_face(w0.is_none(), near, start, acceleration, r, tol, &material);
+        // The board pieces near the marble should cover where it can go this substep
+        // (each query checks that they do, and searches the boards where not; a list that
+        // vouches for a still face covers it).
+        if face.is_none()
+            && !near.is_fresh(cache, start.position, r, start.velocity.length() * h, tol)
+        {
             let motion = (start.velocity.length() + acceleration.0.length() * h) * h;
             if motion < 4.0 * r {
                 let skin = (NEAR_SKIN * motion).clamp(2.0 * r, 8.0 * r);
@@ -155,12 +195,31 @@ impl<'a> Stage<'a> {
                 *near = NearPieces::default();
             }
         }
+        if let Some(tc) = face {
+            let marble = MarbleIn {
+                x0: start.position,
+                v0: start.velocity,
+                w0: None,
+                a: acceleration.0,
+                r,
+                material,
+            };
+            if let Some(out) = resolve_resting_still(boards, params, &marble, &tc, contacts) {
+                (position.0, carry.0) =
+                    compensated_add(config.compensated, start.position, start.carry, out.d);
+                velocity.0 = out.v;
+                return;
+            }
+            // It leaves the face (`lone_touch` would find the same touch, and the closed
+            // form the same answer): to the search.
+            contacts.clear();
+        }
         // The commonest case, a marble resting, sliding or rolling on one piece with
         // nothing else near, is resolved here (the response stage skips it): in closed
         // form, or, for a marble that spins or a board that moves, by the event loop on
         // that one touch.
         // (With or without continuous collision: nothing else is within reach.)
-        if let Some(tc) = near.lone_touch(
+        else if let Some(tc) = near.lone_touch(
             boards,
             start.position,
             start.velocity,

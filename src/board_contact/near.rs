@@ -146,62 +146,151 @@ impl NearPieces {
         if moving && boards.len() > 1 {
             return None;
         }
-        let touch =
-            if !moving && self.face_normal != Vec3::ZERO && b.pose_version == self.pose_version {
-                // A flat face where it was: the distance is affine in the centre.
-                let d = x - self.anchor_world;
-                if d.length() + tol >= self.reach {
-                    return None;
-                }
-                let n = self.face_normal;
-                let gap = self.face_gap + n.dot(d);
-                if gap.abs() > tol {
-                    return None;
-                }
-                Touch {
-                    piece: id,
-                    point: x - (r + gap) * n,
-                    normal: n,
-                    gap,
-                    board_velocity: Vec3::ZERO,
-                    board_accel: Vec3::ZERO,
-                    board_spin: Vec3::ZERO,
-                    material: material.combine(b),
-                    convex: true,
-                }
-            } else {
-                // As `gather` computes it (at the board's pose at the start, bit for bit).
-                let (c, q) = b.pose_at(0.0);
-                let inv = q.conjugate();
-                let local = inv * (x - c);
-                if !self.covers(local, 0.0, tol) {
-                    return None;
-                }
-                let piece = b.geometry.piece(id.part(), id.sub());
-                let p = b.geometry.proximity(id.part(), &piece, local, inv * -v);
-                let gap = p.distance - r;
-                if gap > tol {
-                    return None;
-                }
-                let point = q * p.point + c;
-                let normal = q * p.normal;
-                Touch {
-                    piece: id,
-                    point,
-                    normal,
-                    gap,
-                    board_velocity: b.point_velocity(0.0, point),
-                    board_accel: b.point_accel(0.0, point),
-                    board_spin: b.angular_velocity,
-                    material: material.combine(b),
-                    convex: piece.is_convex(),
-                }
-            };
+        let touch = if !moving && self.holds_still_face(b) {
+            self.face_touch(b, id, x, r, tol, material)?
+        } else {
+            // As `gather` computes it (at the board's pose at the start, bit for bit).
+            let (c, q) = b.pose_at(0.0);
+            let inv = q.conjugate();
+            let local = inv * (x - c);
+            if !self.covers(local, 0.0, tol) {
+                return None;
+            }
+            let piece = b.geometry.piece(id.part(), id.sub());
+            let p = b.geometry.proximity(id.part(), &piece, local, inv * -v);
+            let gap = p.distance - r;
+            if gap > tol {
+                return None;
+            }
+            let point = q * p.point + c;
+            let normal = q * p.normal;
+            Touch {
+                piece: id,
+                point,
+                normal,
+                gap,
+                board_velocity: b.point_velocity(0.0, point),
+                board_accel: b.point_accel(0.0, point),
+                board_spin: b.angular_velocity,
+                material: material.combine(b),
+                convex: piece.is_convex(),
+            }
+        };
         if moving {
             // The one touch at the start (the list covers the centre, and there is no
             // other board); the event loop does the rest.
             return Some(touch);
         }
+        self.vouches(boards, &touch, x, v, a, h, r, tol, spins)
+            .then_some(touch)
+    }
+
+    /// [`NearPieces::lone_touch`] for a marble that does not spin, when the list holds a
+    /// flat face of a still board where it was, for a list [`NearPieces::is_fresh`] keeps
+    /// for this marble (so detection need not ask): the same touch, in closed form, and
+    /// the same test that nothing else is within reach of the substep. `None` in every
+    /// other case (the caller then asks `is_fresh` and `lone_touch`).
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a hot kernel taking plain values"
+    )]
+    #[inline(always)]
+    pub fn still_face(
+        &self,
+        boards: &[BoardSnapshot],
+        epoch: u32,
+        x: Vec3,
+        v: Vec3,
+        a: Vec3,
+        h: f32,
+        r: f32,
+        tol: f32,
+        material: &Material,
+    ) -> Option<Touch> {
+        let [id] = *self.pieces() else {
+            return None;
+        };
+        if self.epoch != epoch || self.radius != r {
+            return None;
+        }
+        let b = boards.get(self.board as usize)?;
+        if b.is_moving() || !self.holds_still_face(b) {
+            return None;
+        }
+        let touch = self.face_touch(b, id, x, r, tol, material)?;
+        // `vouches` asks more of the list than `is_fresh` does (the substep's whole
+        // spread, not its speed alone).
+        self.vouches(boards, &touch, x, v, a, h, r, tol, false)
+            .then_some(touch)
+    }
+
+    /// True when the list holds a flat face of board `b` (which does not move), and the
+    /// board is where it was when the list was built.
+    #[inline(always)]
+    fn holds_still_face(&self, b: &BoardSnapshot) -> bool {
+        self.face_normal != Vec3::ZERO && b.pose_version == self.pose_version
+    }
+
+    /// The touch of the list's flat face `id` of board `b` ([`NearPieces::holds_still_face`])
+    /// for a marble of radius `r` at `x`: the distance is affine in the centre. `None`
+    /// when the list does not cover `x` or the face is farther than `tol`.
+    #[inline(always)]
+    fn face_touch(
+        &self,
+        b: &BoardSnapshot,
+        id: PieceId,
+        x: Vec3,
+        r: f32,
+        tol: f32,
+        material: &Material,
+    ) -> Option<Touch> {
+        let d = x - self.anchor_world;
+        if d.length() + tol >= self.reach {
+            return None;
+        }
+        let n = self.face_normal;
+        let gap = self.face_gap + n.dot(d);
+        if gap.abs() > tol {
+            return None;
+        }
+        Some(Touch {
+            piece: id,
+            point: x - (r + gap) * n,
+            normal: n,
+            gap,
+            board_velocity: Vec3::ZERO,
+            board_accel: Vec3::ZERO,
+            board_spin: Vec3::ZERO,
+            material: material.combine(b),
+            convex: true,
+        })
+    }
+
+    /// True when `touch`, on a piece of the list's board (which does not move), is the
+    /// only piece within reach of the whole substep of length `h` of a marble of radius
+    /// `r` at `x` (world) moving at `v` under acceleration `a` (and friction, when it
+    /// `spins`): the list covers every centre it can reach sliding on the piece (its
+    /// speed, and the acceleration the piece leaves it, over `h`), and no other board
+    /// comes within reach.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a hot kernel taking plain values"
+    )]
+    #[inline(always)]
+    fn vouches(
+        &self,
+        boards: &[BoardSnapshot],
+        touch: &Touch,
+        x: Vec3,
+        v: Vec3,
+        a: Vec3,
+        h: f32,
+        r: f32,
+        tol: f32,
+        spins: bool,
+    ) -> bool {
+        let bi = self.board as usize;
+        let b = &boards[bi];
         // Where the marble can go: at most its speed, and the acceleration the piece
         // leaves it (none into the piece; friction adds at most μ times the normal force
         // for a marble that spins), over the substep; the list and the other boards must
@@ -221,13 +310,13 @@ impl NearPieces {
             self.covers(b.rotation.conjugate() * (x - b.position), spread, tol)
         };
         if !clear {
-            return None;
+            return false;
         }
         let reach = r + tol + spread;
         let world = sphere_aabb(x, reach);
         // (With one board, the common case, there are no others: skip the search, whose
         // closure the compiler leaves a call.)
-        let others_clear = boards.len() == 1
+        boards.len() == 1
             || boards.iter().enumerate().all(|(i, o)| {
                 if i == bi {
                     return true;
@@ -244,8 +333,7 @@ impl NearPieces {
                     }
                     None => false,
                 }
-            });
-        others_clear.then_some(touch)
+            })
     }
 
     /// Calls `f(piece, point, normal, gap)` (world, at the substep's start) for every

@@ -309,15 +309,16 @@ fn records(
 /// The closed form for a marble resting or sliding on one piece
 /// ([`crate::response::resolve_resting`]) gives the event loop's result, bit for bit,
 /// whenever it applies: on the floor, slow or fast, approaching (a collision) or not,
-/// for every integrator.
+/// for every integrator; and the still-face path ([`NearPieces::still_face`] and
+/// [`crate::response::resolve_resting_still`]), wherever it answers, is the same.
 #[test]
 fn resting_closed_form_is_the_event_loop() {
     use crate::components::Contacts;
-    use crate::response::{MarbleIn, resolve_resting};
+    use crate::response::{MarbleIn, resolve_resting, resolve_resting_still};
     let cache = boards(Vec3::ZERO);
     let b = &cache.boards[1];
     let mut rng = Lcg(5);
-    let mut applied = 0;
+    let (mut applied, mut still_faces) = (0, 0);
     for k in 0..4000 {
         let p = case_params(k, H);
         let x0 = near_the_box(&cache, &mut rng);
@@ -349,12 +350,45 @@ fn resting_closed_form_is_the_event_loop() {
         ) else {
             continue;
         };
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
         let mut fast = Contacts::default();
-        let Some(closed) = resolve_resting(&cache.boards, &p, &m, &tc, &mut fast) else {
+        let closed = resolve_resting(&cache.boards, &p, &m, &tc, &mut fast);
+        // The still-face path, where it answers, is the same touch and the same result.
+        if let Some(still) = list.still_face(
+            &cache.boards,
+            cache.epoch,
+            x0,
+            m.v0,
+            m.a,
+            p.h,
+            R,
+            tol,
+            &m.material,
+        ) {
+            let touch = |t: &Touch| {
+                (
+                    t.piece,
+                    bits(t.point),
+                    bits(t.normal),
+                    t.gap.to_bits(),
+                    t.convex,
+                )
+            };
+            assert_eq!(touch(&still), touch(&tc), "case {k}");
+            let mut quick = Contacts::default();
+            let same = resolve_resting_still(&cache.boards, &p, &m, &still, &mut quick);
+            assert_eq!(
+                same.map(|o| (bits(o.d), bits(o.v))),
+                closed.map(|o| (bits(o.d), bits(o.v))),
+                "case {k}"
+            );
+            assert_eq!(records(&quick), records(&fast), "case {k}");
+            still_faces += 1;
+        }
+        let Some(closed) = closed else {
             continue;
         };
         let (looped, full) = event_loop(&cache, &p, &m, tol);
-        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
         assert_eq!(
             (bits(closed.d), bits(closed.v)),
             (bits(looped.d), bits(looped.v)),
@@ -364,6 +398,10 @@ fn resting_closed_form_is_the_event_loop() {
         applied += 1;
     }
     assert!(applied > 400, "applied {applied} times");
+    assert!(
+        still_faces > 400,
+        "the still-face path answered {still_faces} times"
+    );
 }
 
 /// The closed form for a spinning marble on one piece
