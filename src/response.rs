@@ -20,7 +20,7 @@
 //!    resting marble, whose gravity-induced speed `g·h` may well exceed the threshold, is
 //!    never mistaken for an impact. Several touches are solved together by a few
 //!    Gauss–Seidel passes that enforce every `u_n ≥ target`.
-//! 3. **Constrained acceleration.** For every touch the marble is not leaving, the marble
+//! 3. **Constrained acceleration.** For every touch the marble is not leaving (see `Hold`), the marble
 //!    is put on the surface (it is within the touching tolerance of it, or, at the
 //!    substep's start, overlapping it: the end-of-substep check would put it there), its
 //!    residual normal
@@ -38,7 +38,8 @@
 //!    and without adding energy: the centre is projected onto the surface (no velocity is
 //!    added for it), and a collision found this late leaves with normal speed `−e·u0` —
 //!    equation (1) on the approach speed, not on the end speed, which carries the gravity of
-//!    the time spent inside the board.
+//!    the time spent inside the board. A marble found past a piece's middle, away from the
+//!    face it touched at the start, goes back out through that face (see `came_through`).
 //!
 //! # Rolling (only for marbles that spin)
 //! With rolling on, marbles carry an angular velocity `ω` and the solid-sphere inertia
@@ -230,7 +231,8 @@ fn resolve_with<const SPINS: bool>(
     contacts: &mut Contacts,
 ) -> MarbleOut {
     let tol = crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0);
-    let sep = separation_speed(p.threshold);
+    let hold = Hold::new(p.threshold, tol);
+    let sep = hold.speed;
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut t = 0.0f32;
     let mut s = State {
@@ -279,7 +281,7 @@ fn resolve_with<const SPINS: bool>(
             m.a,
             contacts,
         );
-        settle_with::<SPINS>(touches.as_slice(), s, m.a, sep, false, 0.0, friction)
+        settle_with::<SPINS>(touches.as_slice(), s, m.a, hold, false, 0.0, friction)
     };
 
     // From here on `s.v` is the path velocity (see `Integrator`), and `motion` the
@@ -299,9 +301,9 @@ fn resolve_with<const SPINS: bool>(
                 m.a,
                 contacts,
             );
-            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, sep, true, lead);
+            let motion = settle::<SPINS>(touches.as_slice(), &mut s, m.a, hold, true, lead);
             if SPINS {
-                lead_in(touches.as_slice(), &mut s, m.a, sep, motion, lead)
+                lead_in(touches.as_slice(), &mut s, m.a, hold, motion, lead)
             } else {
                 s.v += offset(motion.a);
                 motion
@@ -355,7 +357,7 @@ fn resolve_with<const SPINS: bool>(
             let friction = friction_events < MAX_FRICTION_EVENTS;
             regather(t, &s, touches);
             motion =
-                settle_with::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0, friction);
+                settle_with::<SPINS>(touches.as_slice(), &mut s, m.a, hold, false, 0.0, friction);
             continue;
         }
         t = p.h;
@@ -380,7 +382,7 @@ fn resolve_with<const SPINS: bool>(
                 && motion.a.dot(tc.normal) >= 0.0
         })
     {
-        let (v, w) = reported::<SPINS>(touches.as_slice(), &s, m.a, sep, motion, motion, p);
+        let (v, w) = reported::<SPINS>(touches.as_slice(), &s, m.a, hold, motion, motion, p);
         return MarbleOut { d: s.d, v, w };
     }
 
@@ -407,6 +409,15 @@ fn resolve_with<const SPINS: bool>(
         -s.v,
         touches,
     );
+    // A marble whose centre, at the start, was behind the face it is now found inside
+    // did not come in through that face.
+    if touches
+        .as_slice()
+        .iter()
+        .any(|tc| tc.gap < 0.0 && m.r + tc.gap < s.d.dot(tc.normal))
+    {
+        came_through(boards, near, p, m, tol, s.d, touches);
+    }
     // Touches found only by the wider look that are not the held drift are no touches.
     let mut beyond = [false; MAX_TOUCHES];
     for (i, tc) in touches.as_slice().iter().enumerate() {
@@ -455,7 +466,7 @@ fn resolve_with<const SPINS: bool>(
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
     let friction = friction_events < MAX_FRICTION_EVENTS;
-    let end = settle_with::<SPINS>(touches.as_slice(), &mut s, m.a, sep, false, 0.0, friction);
+    let end = settle_with::<SPINS>(touches.as_slice(), &mut s, m.a, hold, false, 0.0, friction);
     if settled_start
         && t >= p.h
         && matches!(p.integrator, Integrator::VelocityVerlet | Integrator::Rk4)
@@ -484,8 +495,73 @@ fn resolve_with<const SPINS: bool>(
             s.w += 0.5 * p.h * (end.alpha - motion.alpha);
         }
     }
-    let (v, w) = reported::<SPINS>(touches.as_slice(), &s, m.a, sep, end, motion, p);
+    let (v, w) = reported::<SPINS>(touches.as_slice(), &s, m.a, hold, end, motion, p);
     MarbleOut { d: s.d, v, w }
+}
+
+/// The end of a substep found the marble inside a piece, past the piece's middle: the
+/// nearest way out is through the far side, where its centre was behind that side's
+/// face at the substep's start. When the marble touched the piece at the start on
+/// another face (turned away from the far one), it went in through that face within the
+/// substep: pushed into it by its neighbours harder than it was moving off it, or
+/// knocked back into it after leaving it, on a path continuous collision does not watch
+/// (the marble starts on the piece). Its way out is back through that face, where the
+/// board has carried it by the substep's end: the touch is turned to it, so that the
+/// end-of-substep check puts the marble onto the face it came from, not out of the
+/// board's far side (a marble at the bottom of a pile would otherwise fall through a
+/// floor thinner than its diameter).
+#[cold]
+#[inline(never)]
+fn came_through(
+    boards: &[BoardSnapshot],
+    near: Option<&NearPieces>,
+    p: &SubstepParams,
+    m: &MarbleIn,
+    tol: f32,
+    d: Vec3,
+    touches: &mut TouchList,
+) {
+    let mut start = TouchList::default();
+    gather(
+        boards,
+        near,
+        0.0,
+        m.x0,
+        m.r,
+        tol,
+        &m.material,
+        -m.v0,
+        &mut start,
+    );
+    let x = m.x0 + d;
+    for tc in touches.as_mut_slice() {
+        if !(tc.gap < 0.0 && m.r + tc.gap < d.dot(tc.normal)) {
+            continue;
+        }
+        let Some(entry) = start
+            .as_slice()
+            .iter()
+            .find(|st| st.piece == tc.piece && st.normal.dot(tc.normal) < 0.0)
+        else {
+            continue;
+        };
+        // The face it came through, where the board has carried it.
+        let b = &boards[tc.piece.board()];
+        let ((c0, q0), (c1, q1)) = (b.pose_at(0.0), b.pose_at(p.h));
+        let turn = q1 * q0.conjugate();
+        let normal = (turn * entry.normal).normalize();
+        let on_face = turn * (entry.point - c0) + c1;
+        let gap = (x - on_face).dot(normal) - m.r;
+        let point = x - (m.r + gap) * normal;
+        *tc = Touch {
+            point,
+            normal,
+            gap,
+            board_velocity: b.point_velocity(p.h, point),
+            board_accel: b.point_accel(p.h, point),
+            ..*tc
+        };
+    }
 }
 
 /// From the path's velocity and spin at the substep's end back to the integrator's
@@ -505,7 +581,7 @@ fn reported<const SPINS: bool>(
     list: &[Touch],
     s: &State,
     a: Vec3,
-    sep: f32,
+    hold: Hold,
     motion: Motion,
     last: Motion,
     p: &SubstepParams,
@@ -515,7 +591,7 @@ fn reported<const SPINS: bool>(
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     if event_within && lead < 0.0 {
         let mut e = *s;
-        lead_in(list, &mut e, a, sep, motion, -lead);
+        lead_in(list, &mut e, a, hold, motion, -lead);
         (e.v, e.w)
     } else if event_within {
         (s.v - offset(last.a), s.w - offset(last.alpha))
@@ -576,7 +652,11 @@ fn resting<const STILL: bool>(
     debug_assert!(m.w0.is_none() && tc.convex);
     // `respond`, `settle` and `advance` on one touch, written out: the same operations in
     // the same order (so the same bits, NaN included), without their lists.
-    let sep = separation_speed(p.threshold);
+    let hold = Hold::new(
+        p.threshold,
+        crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0),
+    );
+    let sep = hold.speed;
     let n = tc.normal;
     let relative = |v: Vec3| if STILL { v } else { v - tc.board_velocity };
     let mut v = m.v0;
@@ -607,7 +687,12 @@ fn resting<const STILL: bool>(
     }
     // Step 3: on the surface, no normal speed, no acceleration into it.
     let u = relative(v).dot(n);
-    if u <= sep {
+    let pull = if STILL {
+        m.a.dot(n)
+    } else {
+        m.a.dot(n) - (tc.board_accel.dot(n) - 2.0 * relative(v).dot(tc.board_spin.cross(n)))
+    };
+    if hold.holds(u, pull) {
         if tc.gap.abs() > 0.0 {
             d -= tc.gap * n;
         }
@@ -666,7 +751,11 @@ pub fn resolve_rolling(
     if !p.ccd {
         return None;
     }
-    let sep = separation_speed(p.threshold);
+    let hold = Hold::new(
+        p.threshold,
+        crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0),
+    );
+    let sep = hold.speed;
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut s = State {
         d: Vec3::ZERO,
@@ -681,7 +770,7 @@ pub fn resolve_rolling(
     debug_assert!(tc.board_spin == Vec3::ZERO);
     let lead = p.integrator.velocity_lead(p.h);
     respond_on::<true, false>(touch, &mut s, p.threshold, boards, 0.0, 0.0, m.a, contacts);
-    let mut motion = settle_on::<true, false>(touch, &mut s, m.a, sep, true, 0.0);
+    let mut motion = settle_on::<true, false>(touch, &mut s, m.a, hold, true, 0.0);
     if let Some(ts) = motion.slip_stops {
         // `lead_in` without an event in the lead, and none in the substep after it.
         let after = ts - lead;
@@ -715,7 +804,7 @@ fn lead_in(
     list: &[Touch],
     s: &mut State,
     a: Vec3,
-    sep: f32,
+    hold: Hold,
     mut motion: Motion,
     lead: f32,
 ) -> Motion {
@@ -728,7 +817,7 @@ fn lead_in(
                 s.v += motion.a * ts;
                 s.w += motion.alpha * ts;
                 left -= ts;
-                motion = settle::<true>(list, s, a, sep, false, left);
+                motion = settle::<true>(list, s, a, hold, false, left);
             }
             _ => break,
         }
@@ -764,6 +853,38 @@ fn advance<const SPINS: bool>(s: &mut State, m: &Motion, tau: f32) {
 #[inline]
 pub fn separation_speed(threshold: f32) -> f32 {
     (1e-3 * threshold).max(1e-6)
+}
+
+/// When a touch holds a marble (step 3 of the module docs): its normal speed off the
+/// surface is within [`separation_speed`], or the pull into the surface brings it back
+/// before it could rise past the touching tolerance (`u² ≤ 2 |a_n| tol`). A marble in the
+/// second case leaves only in the sense of rounding: judged to leave, it would be free
+/// of a surface its path returns into within a hop too small to see, which continuous
+/// collision does not watch (the marble starts on it) and the end of the substep finds it
+/// deep inside (a marble at the bottom of a pile, pushed into the floor by the marbles
+/// above, came out under the floor).
+#[derive(Clone, Copy, Debug)]
+struct Hold {
+    /// [`separation_speed`], m/s.
+    speed: f32,
+    /// The touching tolerance, m.
+    tol: f32,
+}
+
+impl Hold {
+    fn new(threshold: f32, tol: f32) -> Hold {
+        Hold {
+            speed: separation_speed(threshold),
+            tol,
+        }
+    }
+
+    /// Whether a marble at normal speed `u` off a surface, pulled into it at `pull` (its
+    /// acceleration's normal part less what the surface needs, negative into it), stays.
+    #[inline(always)]
+    fn holds(self, u: f32, pull: f32) -> bool {
+        u <= self.speed || (pull < 0.0 && u * u <= -2.0 * pull * self.tol)
+    }
 }
 
 /// Velocity of the marble's contact point relative to the board, tangential part.
@@ -902,15 +1023,15 @@ fn settle_with<const SPINS: bool>(
     list: &[Touch],
     s: &mut State,
     a: Vec3,
-    sep: f32,
+    hold: Hold,
     overlap: bool,
     lag: f32,
     friction: bool,
 ) -> Motion {
     if friction {
-        settle::<SPINS>(list, s, a, sep, overlap, lag)
+        settle::<SPINS>(list, s, a, hold, overlap, lag)
     } else {
-        settle::<false>(list, s, a, sep, overlap, lag)
+        settle::<false>(list, s, a, hold, overlap, lag)
     }
 }
 
@@ -927,14 +1048,14 @@ fn settle<const SPINS: bool>(
     list: &[Touch],
     s: &mut State,
     a: Vec3,
-    sep: f32,
+    hold: Hold,
     overlap: bool,
     lag: f32,
 ) -> Motion {
     if turns(list) {
-        settle_on::<SPINS, true>(list, s, a, sep, overlap, lag)
+        settle_on::<SPINS, true>(list, s, a, hold, overlap, lag)
     } else {
-        settle_on::<SPINS, false>(list, s, a, sep, overlap, 0.0)
+        settle_on::<SPINS, false>(list, s, a, hold, overlap, 0.0)
     }
 }
 
@@ -944,14 +1065,20 @@ fn settle_on<const SPINS: bool, const TURNING: bool>(
     list: &[Touch],
     s: &mut State,
     a: Vec3,
-    sep: f32,
+    hold: Hold,
     overlap: bool,
     lag: f32,
 ) -> Motion {
     let mut a = a;
     for tc in list {
-        let u = normal_speed::<TURNING>(tc, s.v - tc.board_velocity, lag, a);
-        if u <= sep {
+        let rel = s.v - tc.board_velocity;
+        let u = normal_speed::<TURNING>(tc, rel, lag, a);
+        let pull = if TURNING && tc.board_spin != Vec3::ZERO {
+            a.dot(tc.normal) - turning_need(tc, rel, lag, a)
+        } else {
+            a.dot(tc.normal)
+        };
+        if hold.holds(u, pull) {
             if tc.gap > 0.0 || (overlap && tc.gap < 0.0) {
                 s.d -= tc.gap * tc.normal;
             }
@@ -965,7 +1092,7 @@ fn settle_on<const SPINS: bool, const TURNING: bool>(
     let mut need = [0.0f32; MAX_TOUCHES];
     for (i, tc) in list.iter().enumerate() {
         let rel = s.v - tc.board_velocity;
-        held[i] = normal_speed::<TURNING>(tc, rel, lag, a) <= sep;
+        held[i] = normal_speed::<TURNING>(tc, rel, lag, a) <= hold.speed;
         if TURNING && tc.board_spin != Vec3::ZERO {
             need[i] = turning_need(tc, rel, lag, a);
         }

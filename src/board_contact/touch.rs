@@ -112,6 +112,12 @@ impl TouchList {
         &self.items[..self.len]
     }
 
+    /// The touches, to change in place.
+    #[inline]
+    pub fn as_mut_slice(&mut self) -> &mut [Touch] {
+        &mut self.items[..self.len]
+    }
+
     /// True when empty.
     #[inline]
     pub fn is_empty(&self) -> bool {
