@@ -231,7 +231,7 @@ fn resolve_with<const SPINS: bool>(
     contacts: &mut Contacts,
 ) -> MarbleOut {
     let tol = crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0);
-    let hold = Hold::new(p.threshold, tol);
+    let hold = Hold::new(p.threshold, p.h);
     let sep = hold.speed;
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut t = 0.0f32;
@@ -281,7 +281,15 @@ fn resolve_with<const SPINS: bool>(
             m.a,
             contacts,
         );
-        settle_with::<SPINS>(touches.as_slice(), s, m.a, hold, false, 0.0, friction)
+        settle_with::<SPINS>(
+            touches.as_slice(),
+            s,
+            m.a,
+            hold.within(p.h - t),
+            false,
+            0.0,
+            friction,
+        )
     };
 
     // From here on `s.v` is the path velocity (see `Integrator`), and `motion` the
@@ -356,8 +364,15 @@ fn resolve_with<const SPINS: bool>(
             friction_events += 1;
             let friction = friction_events < MAX_FRICTION_EVENTS;
             regather(t, &s, touches);
-            motion =
-                settle_with::<SPINS>(touches.as_slice(), &mut s, m.a, hold, false, 0.0, friction);
+            motion = settle_with::<SPINS>(
+                touches.as_slice(),
+                &mut s,
+                m.a,
+                hold.within(p.h - t),
+                false,
+                0.0,
+                friction,
+            );
             continue;
         }
         t = p.h;
@@ -382,7 +397,15 @@ fn resolve_with<const SPINS: bool>(
                 && motion.a.dot(tc.normal) >= 0.0
         })
     {
-        let (v, w) = reported::<SPINS>(touches.as_slice(), &s, m.a, hold, motion, motion, p);
+        let (v, w) = reported::<SPINS>(
+            touches.as_slice(),
+            &s,
+            m.a,
+            hold.within(0.0),
+            motion,
+            motion,
+            p,
+        );
         return MarbleOut { d: s.d, v, w };
     }
 
@@ -466,7 +489,15 @@ fn resolve_with<const SPINS: bool>(
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
     let friction = friction_events < MAX_FRICTION_EVENTS;
-    let end = settle_with::<SPINS>(touches.as_slice(), &mut s, m.a, hold, false, 0.0, friction);
+    let end = settle_with::<SPINS>(
+        touches.as_slice(),
+        &mut s,
+        m.a,
+        hold.within(0.0),
+        false,
+        0.0,
+        friction,
+    );
     if settled_start
         && t >= p.h
         && matches!(p.integrator, Integrator::VelocityVerlet | Integrator::Rk4)
@@ -495,7 +526,15 @@ fn resolve_with<const SPINS: bool>(
             s.w += 0.5 * p.h * (end.alpha - motion.alpha);
         }
     }
-    let (v, w) = reported::<SPINS>(touches.as_slice(), &s, m.a, hold, end, motion, p);
+    let (v, w) = reported::<SPINS>(
+        touches.as_slice(),
+        &s,
+        m.a,
+        hold.within(0.0),
+        end,
+        motion,
+        p,
+    );
     MarbleOut { d: s.d, v, w }
 }
 
@@ -652,10 +691,7 @@ fn resting<const STILL: bool>(
     debug_assert!(m.w0.is_none() && tc.convex);
     // `respond`, `settle` and `advance` on one touch, written out: the same operations in
     // the same order (so the same bits, NaN included), without their lists.
-    let hold = Hold::new(
-        p.threshold,
-        crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0),
-    );
+    let hold = Hold::new(p.threshold, p.h);
     let sep = hold.speed;
     let n = tc.normal;
     let relative = |v: Vec3| if STILL { v } else { v - tc.board_velocity };
@@ -692,7 +728,7 @@ fn resting<const STILL: bool>(
     } else {
         m.a.dot(n) - (tc.board_accel.dot(n) - 2.0 * relative(v).dot(tc.board_spin.cross(n)))
     };
-    if hold.holds(u, pull) {
+    if hold.holds(u, pull, tc.gap) {
         if tc.gap.abs() > 0.0 {
             d -= tc.gap * n;
         }
@@ -751,10 +787,7 @@ pub fn resolve_rolling(
     if !p.ccd {
         return None;
     }
-    let hold = Hold::new(
-        p.threshold,
-        crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0),
-    );
+    let hold = Hold::new(p.threshold, p.h);
     let sep = hold.speed;
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut s = State {
@@ -855,35 +888,55 @@ pub fn separation_speed(threshold: f32) -> f32 {
     (1e-3 * threshold).max(1e-6)
 }
 
-/// When a touch holds a marble (step 3 of the module docs): its normal speed off the
+/// When a touch holds a marble (step 3 of the module docs): its normal speed `u` off the
 /// surface is within [`separation_speed`], or the pull into the surface brings it back
-/// before it could rise past the touching tolerance (`u² ≤ 2 |a_n| tol`). A marble in the
-/// second case leaves only in the sense of rounding: judged to leave, it would be free
-/// of a surface its path returns into within a hop too small to see, which continuous
-/// collision does not watch (the marble starts on it) and the end of the substep finds it
-/// deep inside (a marble at the bottom of a pile, pushed into the floor by the marbles
-/// above, came out under the floor).
+/// within the rest of the substep (`span`) slower than the restitution threshold. In the
+/// second case the return would be a contact, which stops the normal motion: the marble
+/// ends held either way, and holding it at once differs only by a hop of at most
+/// `u²/2|a_n|` (the lowest marbles of a pile, pressed into the floor at hundreds of m/s²
+/// while their velocity leaves it at a fraction of a mm/s, hop by nanometres). Judged to
+/// leave, it would be free of a surface its path returns into, which continuous
+/// collision does not watch (the marble starts on it): a marble at the bottom of a pile
+/// ended its substep deep in a floor 2 cm thick and was pushed out under it.
 #[derive(Clone, Copy, Debug)]
 struct Hold {
     /// [`separation_speed`], m/s.
     speed: f32,
-    /// The touching tolerance, m.
-    tol: f32,
+    /// The restitution threshold, m/s.
+    threshold: f32,
+    /// What is left of the substep, s.
+    span: f32,
 }
 
 impl Hold {
-    fn new(threshold: f32, tol: f32) -> Hold {
+    fn new(threshold: f32, span: f32) -> Hold {
         Hold {
             speed: separation_speed(threshold),
-            tol,
+            threshold,
+            span,
         }
     }
 
-    /// Whether a marble at normal speed `u` off a surface, pulled into it at `pull` (its
-    /// acceleration's normal part less what the surface needs, negative into it), stays.
+    /// The same with `span` seconds of the substep left.
+    fn within(self, span: f32) -> Hold {
+        Hold { span, ..self }
+    }
+
+    /// Whether a marble at normal speed `u` off a surface `gap` away (negative: into it),
+    /// pulled into it at `pull` (its acceleration's normal part less what the surface
+    /// needs), stays: the return of `gap + u τ + ½ pull τ² = 0` comes within the span at
+    /// a speed `√(u² − 2 pull gap)` under the threshold (or never, from inside: at once).
     #[inline(always)]
-    fn holds(self, u: f32, pull: f32) -> bool {
-        u <= self.speed || (pull < 0.0 && u * u <= -2.0 * pull * self.tol)
+    fn holds(self, u: f32, pull: f32, gap: f32) -> bool {
+        if u <= self.speed {
+            return true;
+        }
+        if pull >= 0.0 || u >= self.threshold {
+            return false;
+        }
+        let disc = (u * u - 2.0 * pull * gap).max(0.0);
+        let back = disc.sqrt();
+        back < self.threshold && u + back <= -pull * self.span
     }
 }
 
@@ -1078,7 +1131,7 @@ fn settle_on<const SPINS: bool, const TURNING: bool>(
         } else {
             a.dot(tc.normal)
         };
-        if hold.holds(u, pull) {
+        if hold.holds(u, pull, tc.gap) {
             if tc.gap > 0.0 || (overlap && tc.gap < 0.0) {
                 s.d -= tc.gap * tc.normal;
             }
