@@ -723,10 +723,12 @@ fn resting<const STILL: bool>(
     }
     // Step 3: on the surface, no normal speed, no acceleration into it.
     let u = relative(v).dot(n);
-    let pull = if STILL {
-        m.a.dot(n)
-    } else {
-        m.a.dot(n) - (tc.board_accel.dot(n) - 2.0 * relative(v).dot(tc.board_spin.cross(n)))
+    let pull = || {
+        if STILL {
+            m.a.dot(n)
+        } else {
+            m.a.dot(n) - (tc.board_accel.dot(n) - 2.0 * relative(v).dot(tc.board_spin.cross(n)))
+        }
     };
     if hold.holds(u, pull, tc.gap) {
         if tc.gap.abs() > 0.0 {
@@ -923,15 +925,19 @@ impl Hold {
     }
 
     /// Whether a marble at normal speed `u` off a surface `gap` away (negative: into it),
-    /// pulled into it at `pull` (its acceleration's normal part less what the surface
-    /// needs), stays: the return of `gap + u τ + ½ pull τ² = 0` comes within the span at
+    /// pulled into it at `pull()` (its acceleration's normal part less what the surface
+    /// needs, asked only when `u` leaves), stays: the return of `gap + u τ + ½ pull τ² = 0` comes within the span at
     /// a speed `√(u² − 2 pull gap)` under the threshold (or never, from inside: at once).
     #[inline(always)]
-    fn holds(self, u: f32, pull: f32, gap: f32) -> bool {
+    fn holds(self, u: f32, pull: impl FnOnce() -> f32, gap: f32) -> bool {
         if u <= self.speed {
             return true;
         }
-        if pull >= 0.0 || u >= self.threshold {
+        if u >= self.threshold {
+            return false;
+        }
+        let pull = pull();
+        if pull >= 0.0 {
             return false;
         }
         let disc = (u * u - 2.0 * pull * gap).max(0.0);
@@ -1126,10 +1132,12 @@ fn settle_on<const SPINS: bool, const TURNING: bool>(
     for tc in list {
         let rel = s.v - tc.board_velocity;
         let u = normal_speed::<TURNING>(tc, rel, lag, a);
-        let pull = if TURNING && tc.board_spin != Vec3::ZERO {
-            a.dot(tc.normal) - turning_need(tc, rel, lag, a)
-        } else {
-            a.dot(tc.normal)
+        let pull = || {
+            if TURNING && tc.board_spin != Vec3::ZERO {
+                a.dot(tc.normal) - turning_need(tc, rel, lag, a)
+            } else {
+                a.dot(tc.normal)
+            }
         };
         if hold.holds(u, pull, tc.gap) {
             if tc.gap > 0.0 || (overlap && tc.gap < 0.0) {
