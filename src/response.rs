@@ -437,7 +437,7 @@ fn resolve_with<const SPINS: bool>(
     if touches
         .as_slice()
         .iter()
-        .any(|tc| tc.gap < 0.0 && m.r + tc.gap < s.d.dot(tc.normal))
+        .any(|tc| past_middle(tc, m.r, s.d))
     {
         came_through(boards, near, p, m, tol, s.d, touches);
     }
@@ -538,6 +538,14 @@ fn resolve_with<const SPINS: bool>(
     MarbleOut { d: s.d, v, w }
 }
 
+/// True when a marble of radius `r` that moved by `d` over the substep ends overlapping
+/// `tc` with its centre, at the start, behind the touch's face: it did not come in
+/// through that face ([`came_through`]).
+#[inline]
+fn past_middle(tc: &Touch, r: f32, d: Vec3) -> bool {
+    tc.gap < 0.0 && r + tc.gap < d.dot(tc.normal)
+}
+
 /// The end of a substep found the marble inside a piece, past the piece's middle: the
 /// nearest way out is through the far side, where its centre was behind that side's
 /// face at the substep's start. When the marble touched the piece at the start on
@@ -574,7 +582,7 @@ fn came_through(
     );
     let x = m.x0 + d;
     for tc in touches.as_mut_slice() {
-        if !(tc.gap < 0.0 && m.r + tc.gap < d.dot(tc.normal)) {
+        if !past_middle(tc, m.r, d) {
             continue;
         }
         let Some(entry) = start
