@@ -40,6 +40,16 @@ impl Cascade<'_> {
         if u >= -row.limit {
             return;
         }
+        // The impulse is added to the velocities the marbles have now, so it is at most
+        // what restitution 1 gives on their closing speed along `n` now: the largest
+        // impulse along `n` that adds no energy to the pair, whatever the normal. The
+        // judged closing speed is faster than that only where the judgement saw a path the
+        // marbles no longer take (a board met, the pair stage's contacts, a rewind).
+        let now = ((self.bodies[j].v + self.dv[j]) - (self.bodies[i].v + self.dv[i])).dot(row.n);
+        let u = u.max(2.0 * now / (1.0 + row.e));
+        if u >= 0.0 {
+            return;
+        }
         let t = row.t.max(self.event[i]).max(self.event[j]);
         let impulse = -(1.0 + row.e) * u * row.k;
         let (wi, wj) = (self.bodies[i].w, self.bodies[j].w);
