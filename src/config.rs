@@ -195,11 +195,13 @@ fn rk4(x: Vec3, v: Vec3, h: f32, f: impl Fn(Vec3, Vec3) -> Vec3) -> (Vec3, Vec3)
 #[derive(Resource, Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Resource))]
 pub struct StepConfig {
-    /// Gravity, m/s². Default `(0, −9.81, 0)`; any finite vector.
+    /// Gravity, m/s². Default `(0, −9.81, 0)`; finite, each coordinate within
+    /// [`MAX_GRAVITY`](crate::validate::MAX_GRAVITY).
     pub gravity: Vec3,
     /// Seconds per step. Default 1/240 s. Sensible: 1/30 s (coarse, games at low rates)
-    /// to 1e-4 s (reference runs); must be > 0. The plugin overwrites it with the app's
-    /// fixed timestep.
+    /// to 1e-4 s (reference runs); must be > 0 and at most
+    /// [`MAX_DT`](crate::validate::MAX_DT) (1 s). The plugin overwrites it with the app's
+    /// fixed timestep times the plugin's `PhysicsClock::speed`.
     pub dt: f32,
     /// Substeps per step (≥ 1). Default 1. Each step is split into this many equal
     /// substeps; 2–8 buy accuracy for fast or densely touching marbles.
@@ -303,6 +305,35 @@ impl StepConfig {
     #[inline]
     pub fn substep_dt(&self) -> f32 {
         self.dt / self.substeps.max(1) as f32
+    }
+
+    /// Checks the values a step reads, by the rules a scene file's are checked by: the
+    /// first bad one, named `StepConfig.<field>`. A step with a bad value is refused
+    /// ([`crate::validate::StepRefused`]): the world is left as it was.
+    pub fn validate(&self) -> Result<(), crate::validate::InvalidValue> {
+        use crate::validate::{MAX_DT, MAX_GRAVITY, invalid, non_negative, positive, within};
+        within(
+            "StepConfig.gravity",
+            self.gravity,
+            MAX_GRAVITY,
+            "finite, each coordinate within 1e4 m/s²",
+        )?;
+        if !(self.dt > 0.0 && self.dt <= MAX_DT) {
+            return Err(invalid("StepConfig.dt", "> 0 and at most 1 s", self.dt));
+        }
+        if self.substeps < 1 {
+            return Err(invalid("StepConfig.substeps", ">= 1", self.substeps));
+        }
+        non_negative(
+            "StepConfig.restitution_threshold",
+            self.restitution_threshold,
+        )?;
+        non_negative("StepConfig.contact_tolerance", self.contact_tolerance)?;
+        if let Some(sleep) = self.sleep {
+            positive("StepConfig.sleep.speed", sleep.speed)?;
+            positive("StepConfig.sleep.time", sleep.time)?;
+        }
+        Ok(())
     }
 }
 

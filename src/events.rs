@@ -281,6 +281,7 @@ pub fn update_messages(world: &mut World) {
     update::<SensorEntered>(world);
     update::<SensorExited>(world);
     update::<crate::validate::QuarantineReport>(world);
+    update::<crate::validate::StepRefused>(world);
 }
 
 /// A dense grid over the sensors' bounds, for point and short-segment queries: each cell

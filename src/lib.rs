@@ -58,5 +58,5 @@ pub mod prelude {
     pub use crate::schedule::{MarbleSubstep, MarbleSystems};
     pub use crate::simulation::Simulation;
     pub use crate::sleep::{Drowsy, Sleeping};
-    pub use crate::validate::{InvalidValue, QuarantineReport};
+    pub use crate::validate::{InvalidValue, QuarantineReport, StepRefused};
 }

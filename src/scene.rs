@@ -14,7 +14,7 @@ use thiserror::Error;
 
 use crate::config::{Integrator, Preset, Sleep, StepConfig};
 use crate::geometry::{BoardGeometry, PartShape};
-use crate::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_GRAVITY, MAX_SPEED};
+use crate::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_DT, MAX_GRAVITY, MAX_SPEED};
 
 /// Why a scene could not be loaded or used. Each is the user's input at fault.
 #[derive(Debug, Error)]
@@ -54,7 +54,7 @@ pub enum SceneError {
 pub struct Scene {
     /// m/s².
     pub gravity: [f32; 3],
-    /// Seconds per step, > 0.
+    /// Seconds per step, > 0 and at most [`MAX_DT`](crate::validate::MAX_DT) (1 s).
     pub dt: f32,
     /// Substeps per step, ≥ 1.
     pub substeps: u32,
@@ -391,6 +391,9 @@ impl Scene {
     pub fn validate(&self) -> Result<(), SceneError> {
         in_range("gravity", self.gravity, MAX_GRAVITY, GRAVITY_RANGE)?;
         positive("dt", self.dt)?;
+        if self.dt > MAX_DT {
+            return invalid("dt", "at most 1 s", self.dt);
+        }
         if self.substeps < 1 {
             return invalid("substeps", ">= 1", self.substeps);
         }

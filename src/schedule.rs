@@ -7,6 +7,7 @@ use crate::config::{StepConfig, Substep};
 use crate::systems::{
     board_detection, board_response, boards, events, forces, integrate, pairs, sleep, validate,
 };
+use crate::validate::{InvalidValue, StepRefused};
 
 /// The schedule that runs one substep. A step runs it `substeps` times
 /// ([`run_step`]).
@@ -191,6 +192,7 @@ pub fn init_resources(world: &mut World) {
     world.init_resource::<Messages<crate::events::SensorEntered>>();
     world.init_resource::<Messages<crate::events::SensorExited>>();
     world.init_resource::<Messages<crate::validate::QuarantineReport>>();
+    world.init_resource::<Messages<StepRefused>>();
 }
 
 /// Runs one step: `substeps` runs of the substep schedule through `run_substep`; only
@@ -201,9 +203,24 @@ pub fn init_resources(world: &mut World) {
 /// [`Substep::is_last`]) not at all. It sets the [`Substep`] resource before each
 /// substep.
 ///
+/// A [`StepConfig`] with a bad value ([`StepConfig::validate`]) runs no substep: the step
+/// is refused, a [`StepRefused`] message names the field and value (and a log error, when
+/// that reason first appears), and `false` is returned; otherwise `true`.
+///
 /// [`SleepState::is_idle`]: crate::sleep::SleepState::is_idle
-pub fn run_step(world: &mut World, mut run_substep: impl FnMut(&mut World)) {
+pub fn run_step(world: &mut World, mut run_substep: impl FnMut(&mut World)) -> bool {
     let config = world.resource::<StepConfig>();
+    if let Err(reason) = config.validate() {
+        let mut last = world.get_resource_or_init::<LastRefusal>();
+        if last.0.as_ref() != Some(&reason) {
+            log::error!("bevy_marble: step refused: {reason}");
+            last.0 = Some(reason.clone());
+        }
+        if let Some(mut reports) = world.get_resource_mut::<Messages<StepRefused>>() {
+            reports.write(StepRefused { reason });
+        }
+        return false;
+    }
     let (h, count) = (config.substep_dt(), config.substeps.max(1));
     for index in 0..count {
         *world.resource_mut::<Substep>() = Substep { h, index, count };
@@ -215,4 +232,13 @@ pub fn run_step(world: &mut World, mut run_substep: impl FnMut(&mut World)) {
             break;
         }
     }
+    if let Some(mut last) = world.get_resource_mut::<LastRefusal>() {
+        last.0 = None;
+    }
+    true
 }
+
+/// The reason the last step was refused, kept so that a refusal repeated every step logs
+/// once.
+#[derive(Resource, Default)]
+struct LastRefusal(Option<InvalidValue>);

@@ -186,12 +186,16 @@ impl Simulation {
     }
 
     /// Advances one scene `dt` (all substeps). The messages of the step before stay
-    /// readable through this step ([`crate::events`]); older ones are dropped.
+    /// readable through this step ([`crate::events`]); older ones are dropped. A program
+    /// that gave the [`StepConfig`](crate::config::StepConfig) a bad value gets the step
+    /// refused: nothing moves, a [`StepRefused`](crate::validate::StepRefused) message says
+    /// why, and the step is not counted in [`Simulation::steps`].
     pub fn step(&mut self) {
         crate::events::update_messages(&mut self.world);
         let schedule = &mut self.schedule;
-        run_step(&mut self.world, |world| schedule.run(world));
-        self.steps += 1;
+        if run_step(&mut self.world, |world| schedule.run(world)) {
+            self.steps += 1;
+        }
     }
 
     /// The world: marbles and boards are entities, settings are resources.
@@ -219,7 +223,7 @@ impl Simulation {
         &self.sensors
     }
 
-    /// Steps taken so far.
+    /// Steps taken so far (refused steps not counted).
     pub fn steps(&self) -> u64 {
         self.steps
     }

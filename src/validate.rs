@@ -40,6 +40,13 @@ pub const MAX_BOARD_SPIN: f32 = 1e4;
 /// marble–board response took minutes (a fuzzing finding).
 pub const MAX_GRAVITY: f32 = 1e4;
 
+/// Longest supported step, s (a scene's `dt`, [`StepConfig::dt`](crate::StepConfig)). One
+/// step from any supported state under the largest supported gravity stays finite (a marble
+/// at [`MAX_SPEED`] under [`MAX_GRAVITY`] goes at most 1.05e5 m and gains 1e4 m/s), so the
+/// next step's validation finds and quarantines a marble that left the supported range
+/// instead of an overflow; at 10²⁰ s one step under 9.81 m/s² overflows to infinity.
+pub const MAX_DT: f32 = 1.0;
+
 /// A component value the engine refuses: `{component} must be {rule}, got {value}`.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{component} must be {rule}, got {value}")]
@@ -63,7 +70,18 @@ pub struct QuarantineReport {
     pub reason: InvalidValue,
 }
 
-fn invalid(
+/// A step refused because a [`StepConfig`](crate::StepConfig) value is bad (a message; read
+/// it with `MessageReader<StepRefused>`, or from `Messages<StepRefused>` in a
+/// [`Simulation`](crate::Simulation)): nothing in the world changed, and each step is
+/// refused until the value is mended. A log error names the field and value when the
+/// reason first appears.
+#[derive(Message, Debug, Clone, PartialEq)]
+pub struct StepRefused {
+    /// The field (`StepConfig.dt` and the like), its rule and its value.
+    pub reason: InvalidValue,
+}
+
+pub(crate) fn invalid(
     component: &'static str,
     rule: &'static str,
     value: impl std::fmt::Debug,
@@ -76,7 +94,7 @@ fn invalid(
 }
 
 /// `Ok(())` when `v` is finite with every coordinate within `max`.
-fn within(
+pub(crate) fn within(
     component: &'static str,
     v: Vec3,
     max: f32,
@@ -97,7 +115,7 @@ fn finite3(component: &'static str, v: Vec3) -> Result<(), InvalidValue> {
     }
 }
 
-fn positive(component: &'static str, x: f32) -> Result<(), InvalidValue> {
+pub(crate) fn positive(component: &'static str, x: f32) -> Result<(), InvalidValue> {
     if x.is_finite() && x > 0.0 {
         Ok(())
     } else {
@@ -105,7 +123,7 @@ fn positive(component: &'static str, x: f32) -> Result<(), InvalidValue> {
     }
 }
 
-fn non_negative(component: &'static str, x: f32) -> Result<(), InvalidValue> {
+pub(crate) fn non_negative(component: &'static str, x: f32) -> Result<(), InvalidValue> {
     if x.is_finite() && x >= 0.0 {
         Ok(())
     } else {

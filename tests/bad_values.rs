@@ -8,7 +8,7 @@ use bevy_ecs::message::Messages;
 use bevy_marble::components::{RollingResistance, SpinDamping};
 use bevy_marble::prelude::*;
 use bevy_marble::scenes;
-use bevy_marble::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_GRAVITY, MAX_SPEED};
+use bevy_marble::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_DT, MAX_GRAVITY, MAX_SPEED};
 use glam::Vec3;
 
 /// A drop onto a floor and a second marble beside it, stepped once.
@@ -158,6 +158,144 @@ fn a_value_changed_later_is_caught_at_the_next_step() {
         "Radius must be finite and > 0, got -0.01"
     );
     assert_eq!(sim.quarantined(), vec![0]);
+}
+
+/// Every marble's position and velocity bits.
+fn state_bits(sim: &Simulation) -> Vec<u32> {
+    (0..sim.marbles().len())
+        .flat_map(|i| {
+            let (x, v) = sim.marble_state(i);
+            x.to_array().into_iter().chain(v.to_array())
+        })
+        .map(f32::to_bits)
+        .collect()
+}
+
+/// A program that gives the step settings a bad value, through the Rust API, gets the step
+/// refused: nothing moves (bit for bit), the step is not counted, a `StepRefused` message
+/// names the field and value; once mended, the next step runs. Each limit is tested at its
+/// edge: the edge accepted, the next f32 past it refused.
+#[test]
+fn a_bad_step_setting_refuses_the_step_and_leaves_the_world_as_it_was() {
+    type Set = fn(&mut StepConfig);
+    let cases: &[(Set, &str)] = &[
+        (
+            |c| c.dt = f32::NAN,
+            "StepConfig.dt must be > 0 and at most 1 s, got NaN",
+        ),
+        (
+            |c| c.dt = 0.0,
+            "StepConfig.dt must be > 0 and at most 1 s, got 0.0",
+        ),
+        (
+            |c| c.dt = f32::from_bits(MAX_DT.to_bits() + 1),
+            "StepConfig.dt must be > 0 and at most 1 s, got 1.0000001",
+        ),
+        (
+            |c| c.gravity.y = f32::NEG_INFINITY,
+            "StepConfig.gravity must be finite, each coordinate within 1e4 m/s², got Vec3(0.0, -inf, 0.0)",
+        ),
+        (
+            |c| c.gravity.x = f32::from_bits(MAX_GRAVITY.to_bits() + 1),
+            "StepConfig.gravity must be finite, each coordinate within 1e4 m/s², got Vec3(10000.001, -9.81, 0.0)",
+        ),
+        (
+            |c| c.substeps = 0,
+            "StepConfig.substeps must be >= 1, got 0",
+        ),
+        (
+            |c| c.restitution_threshold = -1e-9,
+            "StepConfig.restitution_threshold must be finite and >= 0, got -1e-9",
+        ),
+        (
+            |c| c.contact_tolerance = f32::NAN,
+            "StepConfig.contact_tolerance must be finite and >= 0, got NaN",
+        ),
+        (
+            |c| {
+                c.sleep = Some(Sleep {
+                    speed: 0.0,
+                    time: 0.5,
+                })
+            },
+            "StepConfig.sleep.speed must be finite and > 0, got 0.0",
+        ),
+    ];
+    for &(set, message) in cases {
+        let mut sim = world();
+        step(&mut sim, 3);
+        let good = sim.world().resource::<StepConfig>().clone();
+        let (before, steps) = (state_bits(&sim), sim.steps());
+        set(&mut sim.world_mut().resource_mut::<StepConfig>());
+        for _ in 0..2 {
+            sim.step();
+            assert_eq!(state_bits(&sim), before, "{message}: the world moved");
+            assert_eq!(sim.steps(), steps, "{message}: a refused step was counted");
+            let refused: Vec<_> = sim
+                .world()
+                .resource::<Messages<StepRefused>>()
+                .iter_current_update_messages()
+                .map(|m| m.reason.to_string())
+                .collect();
+            assert_eq!(refused, [message]);
+        }
+        *sim.world_mut().resource_mut::<StepConfig>() = good;
+        sim.step();
+        assert_ne!(
+            state_bits(&sim),
+            before,
+            "{message}: the mended step did not run"
+        );
+        assert_eq!(sim.steps(), steps + 1);
+        let messages = sim.world().resource::<Messages<StepRefused>>();
+        assert_eq!(messages.iter_current_update_messages().count(), 0);
+    }
+    // The edges themselves step.
+    let mut sim = world();
+    {
+        let mut c = sim.world_mut().resource_mut::<StepConfig>();
+        c.dt = MAX_DT;
+        c.gravity = Vec3::new(MAX_GRAVITY, -MAX_GRAVITY, 0.0);
+        c.restitution_threshold = 0.0;
+        c.contact_tolerance = 0.0;
+    }
+    sim.step();
+    assert_eq!(sim.steps(), 1);
+    assert!(sim.world().resource::<Messages<StepRefused>>().is_empty());
+}
+
+/// The longest step under the strongest gravity from the edge of the supported range
+/// leaves finite values, which the next step's validation quarantines as out of range
+/// (at dt = 1e20 s, which scene files refuse, one step overflowed to infinity): a marble
+/// at 1e6 m moving away at 1e5 m/s under 1e4 m/s² back is, after 1 s, where the default
+/// integrator puts it, then quarantined where it is.
+#[test]
+fn the_longest_step_from_the_edge_of_the_range_stays_finite() {
+    let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
+    scene.dt = MAX_DT;
+    scene.gravity = [-MAX_GRAVITY, 0.0, 0.0];
+    scene.marbles[0].position = [MAX_COORDINATE, 0.5, 0.0];
+    scene.marbles[0].velocity = [MAX_SPEED, 0.0, 0.0];
+    assert!(scene.validate().is_ok());
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    assert!(step(&mut sim, 1).is_empty());
+    let (x, v) = sim.marble_state(0);
+    // Semi-implicit Euler takes the whole step's gravity into the velocity first, so x
+    // gains (v − g dt) dt: 1.09e6 m (the exact path is at 1.095e6); f32 resolves 0.125 m
+    // there.
+    let expected = MAX_COORDINATE as f64 + (MAX_SPEED - MAX_GRAVITY) as f64;
+    assert!(((x.x as f64) - expected).abs() <= 0.125, "x = {x}");
+    assert_eq!(v.x, MAX_SPEED - MAX_GRAVITY);
+    let r = step(&mut sim, 1);
+    assert_eq!(r.len(), 1);
+    assert_eq!(r[0].reason.component, "Position");
+    assert_eq!(sim.marble_state(0).0, x);
+    // Scene files refuse anything longer, naming the field.
+    scene.dt = f32::from_bits(MAX_DT.to_bits() + 1);
+    assert_eq!(
+        scene.validate().unwrap_err().to_string(),
+        "dt must be at most 1 s, got 1.0000001"
+    );
 }
 
 /// A board given a non-finite pose is quarantined and out of the step: the marble above
@@ -329,4 +467,61 @@ fn a_bevy_system_setting_a_bad_value_is_reported_to_the_app() {
     let y = w.get::<Position>(marble).unwrap().y;
     app.update();
     assert_eq!(app.world().get::<Position>(marble).unwrap().y, y);
+}
+
+/// In a Bevy app: a `PhysicsClock` speed that makes the fixed step longer than 1 s gets
+/// every such step refused (the marble stays where it is, an `Update` reader gets a
+/// `StepRefused` per fixed step naming `StepConfig.dt` and its value), and the steps run
+/// again once the speed is mended.
+#[cfg(feature = "bevy")]
+#[test]
+fn a_bevy_app_stepping_too_long_gets_its_steps_refused() {
+    use bevy_app::{App, Update};
+    use bevy_ecs::prelude::*;
+    use bevy_marble::plugin::PhysicsClock;
+    use bevy_time::{Fixed, Time, TimePlugin, TimeUpdateStrategy};
+    use std::time::Duration;
+    #[derive(Resource, Default)]
+    struct Seen(Vec<String>);
+    let mut app = App::new();
+    app.add_plugins((TimePlugin, MarblePhysicsPlugin::default()));
+    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        1.0 / 64.0,
+    )));
+    app.insert_resource(Time::<Fixed>::from_seconds(1.0 / 64.0));
+    app.insert_resource(PhysicsClock {
+        paused: false,
+        speed: 128.0,
+    });
+    app.init_resource::<Seen>();
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Position(Vec3::new(0.0, 1.0, 0.0))))
+        .id();
+    app.add_systems(
+        Update,
+        |mut reader: MessageReader<StepRefused>, mut seen: ResMut<Seen>| {
+            seen.0.extend(reader.read().map(|m| m.reason.to_string()));
+        },
+    );
+    for _ in 0..6 {
+        app.update();
+    }
+    let w = app.world();
+    assert_eq!(
+        w.get::<Position>(marble).unwrap().0,
+        Vec3::new(0.0, 1.0, 0.0)
+    );
+    let seen = &w.resource::<Seen>().0;
+    assert!(seen.len() >= 4, "{seen:?}");
+    assert!(
+        seen.iter()
+            .all(|s| s == "StepConfig.dt must be > 0 and at most 1 s, got 2.0"),
+        "{seen:?}"
+    );
+    app.world_mut().resource_mut::<PhysicsClock>().speed = 1.0;
+    for _ in 0..3 {
+        app.update();
+    }
+    assert!(app.world().get::<Position>(marble).unwrap().y < 1.0);
 }

@@ -84,6 +84,7 @@ fn invalid_scenes_name_field_and_value() {
         ("(dt: 0.0)", "dt must be > 0, got 0"),
         ("(dt: -0.1)", "dt must be > 0, got -0.1"),
         ("(dt: NaN)", "dt must be > 0, got NaN"),
+        ("(dt: 1.5)", "dt must be at most 1 s, got 1.5"),
         ("(substeps: 0)", "substeps must be >= 1, got 0"),
         (
             "(gravity: (0.0, inf, 0.0))",

@@ -166,6 +166,7 @@ impl Plugin for MarbleStepPlugin {
         app.add_message::<crate::events::SensorEntered>();
         app.add_message::<crate::events::SensorExited>();
         app.add_message::<crate::validate::QuarantineReport>();
+        app.add_message::<crate::validate::StepRefused>();
         app.add_schedule(substep_schedule());
         app.configure_sets(
             self.schedule,
