@@ -54,7 +54,7 @@ pub enum SceneError {
 pub struct Scene {
     /// m/s².
     pub gravity: [f32; 3],
-    /// Seconds per step, > 0 and at most [`MAX_DT`](crate::validate::MAX_DT) (1 s).
+    /// Seconds per step, > 0 and at most [`MAX_DT`] (1 s).
     pub dt: f32,
     /// Substeps per step, ≥ 1.
     pub substeps: u32,

@@ -40,7 +40,7 @@ pub const MAX_BOARD_SPIN: f32 = 1e4;
 /// marble–board response took minutes (a fuzzing finding).
 pub const MAX_GRAVITY: f32 = 1e4;
 
-/// Longest supported step, s (a scene's `dt`, [`StepConfig::dt`](crate::StepConfig)). One
+/// Longest supported step, s (a scene's `dt`, [`StepConfig::dt`](crate::config::StepConfig)). One
 /// step from any supported state under the largest supported gravity stays finite (a marble
 /// at [`MAX_SPEED`] under [`MAX_GRAVITY`] goes at most 1.05e5 m and gains 1e4 m/s), so the
 /// next step's validation finds and quarantines a marble that left the supported range
@@ -70,7 +70,7 @@ pub struct QuarantineReport {
     pub reason: InvalidValue,
 }
 
-/// A step refused because a [`StepConfig`](crate::StepConfig) value is bad (a message; read
+/// A step refused because a [`StepConfig`](crate::config::StepConfig) value is bad (a message; read
 /// it with `MessageReader<StepRefused>`, or from `Messages<StepRefused>` in a
 /// [`Simulation`](crate::Simulation)): nothing in the world changed, and each step is
 /// refused until the value is mended. A log error names the field and value when the
