@@ -420,28 +420,36 @@ fn a_board_spin_or_gravity_past_the_supported_range_is_refused() {
     assert_eq!(r[0].reason.component, "AngularVelocity");
 }
 
-/// In a Bevy app: a system of the game sets a restitution of 2 in `Update`; the marble is
-/// quarantined at the next fixed step, stays put, and a reader in `Update` gets the report.
+/// A Bevy app with the physics at a fixed step of 1/64 s, advanced 1/64 s per update,
+/// and one marble 1 m up.
 #[cfg(feature = "bevy")]
-#[test]
-fn a_bevy_system_setting_a_bad_value_is_reported_to_the_app() {
-    use bevy_app::{App, Update};
-    use bevy_ecs::prelude::*;
+fn fixed_step_app() -> (bevy_app::App, bevy_ecs::entity::Entity) {
     use bevy_time::{Fixed, Time, TimePlugin, TimeUpdateStrategy};
     use std::time::Duration;
-    #[derive(Resource, Default)]
-    struct Seen(Vec<QuarantineReport>);
-    let mut app = App::new();
+    let mut app = bevy_app::App::new();
     app.add_plugins((TimePlugin, MarblePhysicsPlugin::default()));
     app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
         1.0 / 64.0,
     )));
     app.insert_resource(Time::<Fixed>::from_seconds(1.0 / 64.0));
-    app.init_resource::<Seen>();
     let marble = app
         .world_mut()
         .spawn((Marble, Position(Vec3::new(0.0, 1.0, 0.0))))
         .id();
+    (app, marble)
+}
+
+/// In a Bevy app: a system of the game sets a restitution of 2 in `Update`; the marble is
+/// quarantined at the next fixed step, stays put, and a reader in `Update` gets the report.
+#[cfg(feature = "bevy")]
+#[test]
+fn a_bevy_system_setting_a_bad_value_is_reported_to_the_app() {
+    use bevy_app::Update;
+    use bevy_ecs::prelude::*;
+    #[derive(Resource, Default)]
+    struct Seen(Vec<QuarantineReport>);
+    let (mut app, marble) = fixed_step_app();
+    app.init_resource::<Seen>();
     app.add_systems(
         Update,
         move |mut q: Query<&mut Restitution>,
@@ -476,28 +484,17 @@ fn a_bevy_system_setting_a_bad_value_is_reported_to_the_app() {
 #[cfg(feature = "bevy")]
 #[test]
 fn a_bevy_app_stepping_too_long_gets_its_steps_refused() {
-    use bevy_app::{App, Update};
+    use bevy_app::Update;
     use bevy_ecs::prelude::*;
     use bevy_marble::plugin::PhysicsClock;
-    use bevy_time::{Fixed, Time, TimePlugin, TimeUpdateStrategy};
-    use std::time::Duration;
     #[derive(Resource, Default)]
     struct Seen(Vec<String>);
-    let mut app = App::new();
-    app.add_plugins((TimePlugin, MarblePhysicsPlugin::default()));
-    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-        1.0 / 64.0,
-    )));
-    app.insert_resource(Time::<Fixed>::from_seconds(1.0 / 64.0));
+    let (mut app, marble) = fixed_step_app();
     app.insert_resource(PhysicsClock {
         paused: false,
         speed: 128.0,
     });
     app.init_resource::<Seen>();
-    let marble = app
-        .world_mut()
-        .spawn((Marble, Position(Vec3::new(0.0, 1.0, 0.0))))
-        .id();
     app.add_systems(
         Update,
         |mut reader: MessageReader<StepRefused>, mut seen: ResMut<Seen>| {
