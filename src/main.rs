@@ -84,6 +84,11 @@ struct RunArgs {
     /// No progress bar or summary.
     #[arg(long)]
     quiet: bool,
+    /// Threads of the compute task pool in a build with the `parallel` feature (default:
+    /// the cores this process may use); every count gives the same bits. A build without
+    /// `parallel` runs on one thread and accepts only 1.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=1024))]
+    threads: Option<u16>,
 }
 
 /// An error and the exit status it maps to: 2 for the user's input, 1 for anything else.
@@ -198,6 +203,9 @@ fn load(path: &Path) -> Result<Scene, Failure> {
 }
 
 fn run_file(args: &RunArgs) -> Result<(), Failure> {
+    if let Some(n) = args.threads {
+        task_pool(n)?;
+    }
     let scene = load(&args.scene)?;
     let steps = args.steps.unwrap_or_else(|| scene.default_steps());
     let poses = match &args.poses {
@@ -218,6 +226,35 @@ fn run_file(args: &RunArgs) -> Result<(), Failure> {
         quiet: args.quiet,
     };
     simulate(&scene, &args.scene.display().to_string(), steps, &outputs)
+}
+
+/// Sets up the compute task pool with `n` threads before the engine's default (the
+/// available cores) would.
+#[cfg(feature = "parallel")]
+fn task_pool(n: u16) -> Result<(), Failure> {
+    let n = usize::from(n);
+    let pool = bevy_tasks::ComputeTaskPool::get_or_init(|| {
+        bevy_tasks::TaskPoolBuilder::new().num_threads(n).build()
+    });
+    if pool.thread_num() == n {
+        Ok(())
+    } else {
+        Err(other_error(format!(
+            "--threads {n}: the task pool already has {} threads",
+            pool.thread_num()
+        )))
+    }
+}
+
+#[cfg(not(feature = "parallel"))]
+fn task_pool(n: u16) -> Result<(), Failure> {
+    if n == 1 {
+        Ok(())
+    } else {
+        Err(input_error(format!(
+            "--threads {n}: this marble was built without the `parallel` feature and runs on one thread"
+        )))
+    }
 }
 
 fn run_default() -> Result<(), Failure> {

@@ -60,7 +60,7 @@ pub fn labyrinth(n: usize) -> Scene {
     }
     let tilt = -0.1f32;
     let mut board = BoardDesc::new(ShapeDesc::Compound(parts));
-    board.rotation = [(tilt / 2.0).sin(), 0.0, 0.0, (tilt / 2.0).cos()];
+    board.rotation = [libm::sinf(tilt / 2.0), 0.0, 0.0, libm::cosf(tilt / 2.0)];
     board.angular_velocity = [0.02, 0.0, 0.0];
     board.restitution = 0.6;
     // Marbles are placed in the board's frame (above its tilted floor: on a large board
@@ -254,8 +254,8 @@ pub fn walled_board(n: usize) -> Scene {
     let half = spacing * side as f32 * 0.5 + spacing;
     let tilt = 1.0f32.to_radians();
     let mut board = BoardDesc::new(ShapeDesc::Compound(walled_floor(half, 0.03)));
-    board.rotation = [0.0, 0.0, (tilt / 2.0).sin(), (tilt / 2.0).cos()];
-    let (s, c) = tilt.sin_cos();
+    board.rotation = [0.0, 0.0, libm::sinf(tilt / 2.0), libm::cosf(tilt / 2.0)];
+    let (s, c) = libm::sincosf(tilt);
     let marbles = (0..n)
         .map(|k| {
             let (i, j) = (k % side, k / side);

@@ -268,6 +268,25 @@ fn cli_run_writes_the_contract_csv_deterministically() {
     );
     assert!(o.status.success());
     assert_eq!(csv, std::fs::read_to_string(dir.join("b.csv")).unwrap());
+    // One thread asked for is what every build runs.
+    let o = marble(
+        &[
+            "run",
+            "drop.ron",
+            "--steps",
+            "25",
+            "--every",
+            "10",
+            "--csv",
+            "t.csv",
+            "--quiet",
+            "--threads",
+            "1",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(csv, std::fs::read_to_string(dir.join("t.csv")).unwrap());
     // JSON gives the same bytes.
     std::fs::write(dir.join("drop.json"), CONTRACT_JSON).unwrap();
     let o = marble(
@@ -326,8 +345,19 @@ fn cli_bad_input_exits_2_with_one_line_and_no_output() {
         ),
         (&["run", "scene.ron", "--every", "0"], "error: "),
         (&["run", "--wobble"], "error: "),
+        (&["run", "scene.ron", "--threads", "0"], "error: "),
     ];
-    for (args, start) in cases {
+    // A build without `parallel` runs on one thread and says so.
+    let serial: &[(&[&str], &str)] = &[(
+        &["run", "scene.ron", "--threads", "4", "--csv", "out.csv"],
+        "error: --threads 4: this marble was built without the `parallel` feature",
+    )];
+    let serial = if cfg!(feature = "parallel") {
+        &[]
+    } else {
+        serial
+    };
+    for (args, start) in cases.iter().chain(serial) {
         let o = marble(args, &dir);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
         let err = stderr(&o);

@@ -76,7 +76,7 @@ impl BoardSnapshot {
         } else {
             (
                 self.position + self.velocity * t,
-                (Quat::from_scaled_axis(self.angular_velocity * t) * self.rotation).normalize(),
+                (turn(self.angular_velocity * t) * self.rotation).normalize(),
             )
         }
     }
@@ -149,4 +149,17 @@ impl BoardCache {
             b.pose_version = l.4;
         }
     }
+}
+
+/// The rotation by `|v|` about `v`'s direction (`Quat::from_scaled_axis`), its sine and
+/// cosine from the `libm` crate: software, so the same bits on every platform, where the
+/// standard library's `sin_cos` is the platform's own.
+pub fn turn(v: Vec3) -> Quat {
+    let angle = v.length();
+    if angle == 0.0 {
+        return Quat::IDENTITY;
+    }
+    let (s, c) = libm::sincosf(0.5 * angle);
+    let axis = v / angle * s;
+    Quat::from_xyzw(axis.x, axis.y, axis.z, c)
 }
