@@ -244,6 +244,7 @@ fn boards_rotating_at_ten_radians_per_second() {
         Vec3::ZERO,
         Vec3::ZERO,
         Vec3::ZERO,
+        Vec3::ZERO,
         Vec3::new(0.0, 0.0, 10.0),
         Quat::from_rotation_z(-0.5) * Vec3::Y,
         0.002,

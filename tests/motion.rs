@@ -229,6 +229,7 @@ fn no_tunnelling_with_ccd() {
         let (_, want) = face_impact(
             Vec3::ZERO,
             Vec3::new(300.0, 0.0, 0.0),
+            Vec3::ZERO,
             Vec3::new(1.0, 0.0, 0.0),
             Vec3::from_array(wall_velocity),
             Vec3::from_array(spin),
@@ -248,6 +249,7 @@ fn no_tunnelling_with_ccd() {
         face_impact(
             Vec3::ZERO,
             Vec3::X * 300.0,
+            Vec3::ZERO,
             Vec3::X,
             vb,
             Vec3::ZERO,

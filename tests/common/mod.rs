@@ -100,15 +100,17 @@ pub fn turning_board_exact(
     (x, v, (w - dq / r) as f32)
 }
 
-/// Equation (1) at the first touch of a marble moving from `x0` at constant velocity
-/// `v` with a flat face of a board: the face is the plane at `offset` from the board's
-/// centre (`c0 + vb t`) along its normal, which turns as `spin` turns the board from `n0`
-/// (no gravity), for a marble of radius `r`. Returns the impact time (bisection in f64 on the centre-to-face gap) and
-/// the velocity after, with `v_b(p) = vb + spin × (p − c)` at the contact point.
+/// Equation (1) at the first touch of a marble moving from `x0` on the parabola
+/// `x0 + v t + ½ a t²` with a flat face of a board: the face is the plane at `offset` from
+/// the board's centre (`c0 + vb t`) along its normal, which turns as `spin` turns the board
+/// from `n0`, for a marble of radius `r`. Returns the impact time (bisection in f64 on the
+/// centre-to-face gap) and the velocity just after, equation (1) on `v + a t` with
+/// `v_b(p) = vb + spin × (p − c)` at the contact point.
 #[allow(clippy::too_many_arguments)]
 pub fn face_impact(
     x0: glam::Vec3,
     v: glam::Vec3,
+    a: glam::Vec3,
     c0: glam::Vec3,
     vb: glam::Vec3,
     spin: glam::Vec3,
@@ -118,9 +120,10 @@ pub fn face_impact(
     e: f32,
 ) -> (f64, glam::Vec3) {
     use glam::Vec3;
-    let (x0, v, c0, vb, spin, n0) = (
+    let (x0, v, a, c0, vb, spin, n0) = (
         x0.as_dvec3(),
         v.as_dvec3(),
+        a.as_dvec3(),
         c0.as_dvec3(),
         vb.as_dvec3(),
         spin.as_dvec3(),
@@ -133,7 +136,8 @@ pub fn face_impact(
             glam::DQuat::from_scaled_axis(spin * t) * n0
         }
     };
-    let gap = |t: f64| (x0 + v * t - (c0 + vb * t)).dot(normal(t)) - offset as f64 - r as f64;
+    let path = |t: f64| x0 + v * t + 0.5 * a * t * t;
+    let gap = |t: f64| (path(t) - (c0 + vb * t)).dot(normal(t)) - offset as f64 - r as f64;
     let (mut lo, mut hi) = (0.0f64, 0.0f64);
     while gap(hi) > 0.0 {
         lo = hi;
@@ -145,9 +149,9 @@ pub fn face_impact(
     }
     let t = hi;
     let n = normal(t);
-    let x = x0 + v * t;
-    let p = x - r as f64 * n;
+    let p = path(t) - r as f64 * n;
     let v_b = vb + spin.cross(p - (c0 + vb * t));
-    let after = v - (1.0 + e as f64) * (v - v_b).dot(n) * n;
+    let u = v + a * t;
+    let after = u - (1.0 + e as f64) * (u - v_b).dot(n) * n;
     (t, after.as_vec3())
 }
