@@ -11,6 +11,34 @@ use bevy_marble::scenes;
 use bevy_marble::validate::{MAX_BOARD_SPIN, MAX_COORDINATE, MAX_DT, MAX_GRAVITY, MAX_SPEED};
 use glam::Vec3;
 
+/// Every log line of this test binary, for the tests that check what the engine logs (each
+/// looks for its own entity or message: the tests run side by side).
+static LOG: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+struct Capture;
+
+impl log::Log for Capture {
+    fn enabled(&self, _: &log::Metadata) -> bool {
+        true
+    }
+    fn log(&self, record: &log::Record) {
+        LOG.lock()
+            .unwrap()
+            .push(format!("{} {}", record.level(), record.args()));
+    }
+    fn flush(&self) {}
+}
+
+/// Installs [`Capture`] (once per process) and returns the lines logged so far.
+fn logged() -> Vec<String> {
+    static INSTALL: std::sync::Once = std::sync::Once::new();
+    INSTALL.call_once(|| {
+        log::set_logger(&Capture).expect("no other logger in this binary");
+        log::set_max_level(log::LevelFilter::Trace);
+    });
+    LOG.lock().unwrap().clone()
+}
+
 /// A drop onto a floor and a second marble beside it, stepped once.
 fn world() -> Simulation {
     let mut scene = scenes::drop_on_plane(0.5, 0.008, 0.5);
@@ -140,9 +168,11 @@ fn every_bad_marble_value_is_quarantined_where_it_is() {
 }
 
 /// A value spoiled later (a program setting a radius of −0.01 m after ten steps) is caught
-/// at the next step: the marble stops where it was, and the message says what and why.
+/// at the next step: the marble stops where it was, and the message and a log warning say
+/// what and why.
 #[test]
 fn a_value_changed_later_is_caught_at_the_next_step() {
+    logged();
     let mut sim = world();
     assert!(step(&mut sim, 10).is_empty());
     let marble = sim.marbles()[0];
@@ -158,6 +188,9 @@ fn a_value_changed_later_is_caught_at_the_next_step() {
         "Radius must be finite and > 0, got -0.01"
     );
     assert_eq!(sim.quarantined(), vec![0]);
+    // And a log warning says the same.
+    let line = format!("WARN bevy_marble: {marble} quarantined: {}", r[0].reason);
+    assert!(logged().contains(&line), "{line}");
 }
 
 /// Every marble's position and velocity bits.
@@ -303,10 +336,6 @@ fn the_longest_step_from_the_edge_of_the_range_stays_finite() {
 #[test]
 fn a_bad_board_is_quarantined_and_out_of_the_step() {
     let mut sim = world();
-    let board = sim
-        .world()
-        .resource::<bevy_marble::board_contact::BoardCache>();
-    let _ = board;
     let floor = {
         let mut q = sim
             .world_mut()
@@ -489,6 +518,7 @@ fn a_bevy_app_stepping_too_long_gets_its_steps_refused() {
     use bevy_marble::plugin::PhysicsClock;
     #[derive(Resource, Default)]
     struct Seen(Vec<String>);
+    logged();
     let (mut app, marble) = fixed_step_app();
     app.insert_resource(PhysicsClock {
         paused: false,
@@ -516,9 +546,107 @@ fn a_bevy_app_stepping_too_long_gets_its_steps_refused() {
             .all(|s| s == "StepConfig.dt must be > 0 and at most 1 s, got 2.0"),
         "{seen:?}"
     );
+    // One log error for the reason, not one per refused step (other tests of this binary
+    // may log the same line: at least one, and no more than the tests that refuse dt = 2).
+    let line =
+        "ERROR bevy_marble: step refused: StepConfig.dt must be > 0 and at most 1 s, got 2.0";
+    let count = logged().iter().filter(|l| *l == line).count();
+    assert!((1..seen.len()).contains(&count), "{count} × {line}");
     app.world_mut().resource_mut::<PhysicsClock>().speed = 1.0;
     for _ in 0..3 {
         app.update();
     }
     assert!(app.world().get::<Position>(marble).unwrap().y < 1.0);
+}
+
+/// In a Bevy app: a marble spawned with a radius of −1 and a board spawned with a
+/// restitution of 1.5 (a floor right under a falling marble) are quarantined at the next
+/// fixed step, where they were spawned; an `Update` reader gets a report naming each entity,
+/// component and value, the log has a warning saying the same, and the good marble falls
+/// through where the board is, bit for bit as in the same app without the two.
+#[cfg(feature = "bevy")]
+#[test]
+fn a_bevy_app_quarantines_what_it_spawns_with_bad_values_and_logs_it() {
+    use bevy_app::Update;
+    use bevy_ecs::prelude::*;
+    #[derive(Resource, Default)]
+    struct Seen(Vec<QuarantineReport>);
+    logged();
+    let (mut app, marble) = fixed_step_app();
+    let (mut alone, alone_marble) = fixed_step_app();
+    app.init_resource::<Seen>();
+    app.add_systems(
+        Update,
+        |mut reader: MessageReader<QuarantineReport>, mut seen: ResMut<Seen>| {
+            seen.0.extend(reader.read().cloned());
+        },
+    );
+    for _ in 0..2 {
+        app.update();
+        alone.update();
+    }
+    let bad_marble = app
+        .world_mut()
+        .spawn((Marble, Position(Vec3::new(1.0, 1.0, 0.0)), Radius(-1.0)))
+        .id();
+    let bad_board = app
+        .world_mut()
+        .spawn((
+            Board,
+            Collider::plane(),
+            Position(Vec3::new(0.0, 0.9, 0.0)),
+            Restitution(1.5),
+        ))
+        .id();
+    for _ in 0..30 {
+        app.update();
+        alone.update();
+    }
+    let w = app.world();
+    assert!(w.get::<Quarantined>(bad_marble).is_some());
+    assert!(w.get::<Quarantined>(bad_board).is_some());
+    assert_eq!(
+        w.get::<Position>(bad_marble).unwrap().0,
+        Vec3::new(1.0, 1.0, 0.0)
+    );
+    let y = w.get::<Position>(marble).unwrap().0;
+    assert!(y.y < 0.9, "the marble stopped on the bad board: {y}");
+    assert_eq!(
+        y.to_array().map(f32::to_bits),
+        alone
+            .world()
+            .get::<Position>(alone_marble)
+            .unwrap()
+            .0
+            .to_array()
+            .map(f32::to_bits)
+    );
+    let mut seen: Vec<(Entity, String)> = w
+        .resource::<Seen>()
+        .0
+        .iter()
+        .map(|r| (r.entity, r.reason.to_string()))
+        .collect();
+    seen.sort();
+    let mut want = vec![
+        (
+            bad_marble,
+            "Radius must be finite and > 0, got -1.0".to_string(),
+        ),
+        (
+            bad_board,
+            "Restitution must be in [0, 1], got 1.5".to_string(),
+        ),
+    ];
+    want.sort();
+    assert_eq!(seen, want);
+    let log = logged();
+    for (entity, reason) in &want {
+        let line = format!("WARN bevy_marble: {entity} quarantined: {reason}");
+        assert_eq!(
+            log.iter().filter(|l| **l == line).count(),
+            1,
+            "{line} in {log:?}"
+        );
+    }
 }
