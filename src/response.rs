@@ -192,6 +192,9 @@ struct Motion {
     rolls: bool,
     /// The touches (bits by index) whose friction is static: rolling, or at rest.
     gripped: u8,
+    /// At least one touch, and every touch holds the marble (its normal speed within
+    /// [`separation_speed`]): the accelerations are those constraints'.
+    held: bool,
 }
 
 /// The result of [`resolve`] for one marble.
@@ -548,6 +551,27 @@ fn resolve_with<const SPINS: bool>(
             }
         }
     }
+    // Semi-implicit Euler is `v' = v + h a(x)`, `x' = x + h v'`: when the same touches
+    // held the marble all through the substep (no event, held at its start and its end),
+    // its reported velocity gets the acceleration the substep ran on, the start's, which
+    // makes it the symplectic scheme on a curved or turning surface too. Taken from the end
+    // instead, the force a marble in a bowl feels would be held from the start and reported
+    // from the end, and its swing would grow as `exp(ω² h t / 4)`. When the touches change
+    // (a marble that lands, or leaves), the end's is the one it goes on with.
+    let end = if settled_start
+        && t >= p.h
+        && motion.held
+        && end.held
+        && p.integrator == Integrator::SemiImplicitEuler
+    {
+        Motion {
+            a: motion.a,
+            alpha: motion.alpha,
+            ..end
+        }
+    } else {
+        end
+    };
     let (v, w) = reported::<SPINS>(
         touches.as_slice(),
         &s,
@@ -902,6 +926,7 @@ fn free(a: Vec3) -> Motion {
         slip_stops: None,
         rolls: true,
         gripped: 0,
+        held: false,
     }
 }
 
@@ -1232,6 +1257,7 @@ fn settle_on<const SPINS: bool, const TURNING: bool>(
         }
     }
     let mut motion = free(a);
+    motion.held = !list.is_empty() && held[..list.len()].iter().all(|&h| h);
     if SPINS {
         for (i, tc) in list.iter().enumerate() {
             let nf = normal_force[i];
