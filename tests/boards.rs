@@ -189,17 +189,8 @@ fn impacts_under_gravity_for_every_integrator() {
                 E,
             );
             let mut sim = Simulation::from_scene(&scene).unwrap();
-            let marble = sim.marbles()[0];
             let what = format!("{integrator:?}, {name}");
-            let (step, c) = (0..60)
-                .find_map(|step| {
-                    sim.step();
-                    let contacts = sim.world().get::<Contacts>(marble).unwrap();
-                    contacts
-                        .iter()
-                        .find(|c| c.kind == ContactKind::Collision)
-                        .map(|c| (step, *c))
-                })
+            let (step, c) = common::first_collision(&mut sim, 60)
                 .unwrap_or_else(|| panic!("{what}: no collision"));
             let t = step as f32 * dt + c.time;
             assert!(

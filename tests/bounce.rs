@@ -152,18 +152,10 @@ fn first_impact_time() {
     for integrator in Integrator::ALL {
         let scene = drop_scene(H, R, e, dt, integrator, true);
         let mut sim = Simulation::from_scene(&scene).unwrap();
-        let marble = sim.marbles()[0];
         let lead = integrator.velocity_lead(dt);
         let exact = (lead * lead + 2.0 * H / G).sqrt() - lead;
-        let hit = (0..60).find_map(|step| {
-            sim.step();
-            let contacts = sim.world().get::<Contacts>(marble).unwrap();
-            contacts
-                .iter()
-                .find(|c| c.kind == ContactKind::Collision)
-                .map(|c| (step, *c))
-        });
-        let (step, c) = hit.unwrap_or_else(|| panic!("{integrator:?}: no collision recorded"));
+        let (step, c) = first_collision(&mut sim, 60)
+            .unwrap_or_else(|| panic!("{integrator:?}: no collision recorded"));
         let t = step as f32 * dt + c.time;
         assert!(
             (t - exact).abs() <= 1e-5,

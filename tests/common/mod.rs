@@ -155,3 +155,21 @@ pub fn face_impact(
     let after = u - (1.0 + e as f64) * (u - v_b).dot(n) * n;
     (t, after.as_vec3())
 }
+
+/// Steps `sim` up to `steps` times until marble 0 records a collision: the step's index
+/// and the collision.
+pub fn first_collision(
+    sim: &mut bevy_marble::prelude::Simulation,
+    steps: usize,
+) -> Option<(usize, bevy_marble::prelude::Contact)> {
+    use bevy_marble::prelude::*;
+    let marble = sim.marbles()[0];
+    (0..steps).find_map(|step| {
+        sim.step();
+        let contacts = sim.world().get::<Contacts>(marble).unwrap();
+        contacts
+            .iter()
+            .find(|c| c.kind == ContactKind::Collision)
+            .map(|c| (step, *c))
+    })
+}
