@@ -93,7 +93,9 @@ fn rolling(c: &mut Criterion) {
 /// The three bench scenes with marble–marble collisions on ([`scenes::BenchScene`]): (a)
 /// the walled board (marbles never touch each other, so this is the broad phase's cost),
 /// (b) marbles poured into a box (dense contact; the scene runs 8 substeps per 1/60 s
-/// step) and (c) the labyrinth scaled to N. Throughput is marble-steps.
+/// step) and (c) the labyrinth scaled to N; and (b) at the fewest substeps that meet the
+/// pile bar ([`scenes::POUR_BOX_BAR_SUBSTEPS`], id `pour_box_bar`). Throughput is
+/// marble-steps.
 fn marble_collisions(c: &mut Criterion) {
     let mut group = c.benchmark_group("marble_collisions");
     for (kind, sizes) in [
@@ -110,6 +112,13 @@ fn marble_collisions(c: &mut Criterion) {
             group.sample_size(10);
             bench_scene(&mut group, BenchmarkId::new(kind.name(), n), &scene);
         }
+    }
+    for n in [1_000, 10_000] {
+        let scene = Scene {
+            substeps: scenes::POUR_BOX_BAR_SUBSTEPS,
+            ..scenes::pour_box(n)
+        };
+        bench_scene(&mut group, BenchmarkId::new("pour_box_bar", n), &scene);
     }
     group.finish();
 }

@@ -1,5 +1,6 @@
 //! Pours marbles into a walled box (bench scene (b)) and reports how the pile settles:
-//! every half second, the fastest marble, how many move faster than 5 cm/s, the deepest
+//! every half second, the fastest marble, how many move faster than 5 cm/s, how many are
+//! out of the box (centre beyond a wall's inner face or under the floor), the deepest
 //! marble–marble overlap and how many marbles touch each other; then the last time any
 //! marble moved at 5 cm/s or more (checked every step) and the wall time.
 //!
@@ -43,12 +44,23 @@ fn main() {
     }
     let mut sim = Simulation::from_scene(&scene).expect("the bench scene is valid");
     let r = scene.marbles[0].radius;
+    // The walls' inner faces (the first wall of `scenes::walled_floor`) and the floor's top
+    // at y = 0.
+    let inner = match &scene.boards[0].shape {
+        bevy_marble::scene::ShapeDesc::Compound(parts) => match parts[1].shape {
+            bevy_marble::scene::ShapeDesc::Cuboid { half_extents } => {
+                parts[1].position[0] - half_extents[0]
+            }
+            _ => unreachable!("the pour box's walls are cuboids"),
+        },
+        _ => unreachable!("the pour box is a compound"),
+    };
     println!(
         "{n} marbles, dt {:.4} s in {} substeps, {} solver passes",
         scene.dt, scene.substeps, scene.solver_iterations
     );
     println!(
-        "  time | fastest m/s | > 5 cm/s | deepest overlap / r | touching pairs | asleep | ns per marble-step"
+        "  time | fastest m/s | > 5 cm/s | out | deepest overlap / r | touching pairs | asleep | ns per marble-step"
     );
     let steps = (arg(5).unwrap_or(6) as f32 / scene.dt).round() as u64;
     let every = (0.5 / scene.dt).round() as u64;
@@ -73,6 +85,12 @@ fn main() {
             let speeds: Vec<f32> = (0..n).map(|i| sim.marble_state(i).1.length()).collect();
             let fastest = speeds.iter().copied().fold(0.0, f32::max);
             let moving = speeds.iter().filter(|&&v| v >= 0.05).count();
+            let out = (0..n)
+                .filter(|&i| {
+                    let x = sim.marble_state(i).0;
+                    x.x.abs() > inner || x.z.abs() > inner || x.y < 0.0 || !x.is_finite()
+                })
+                .count();
             let contacts = sim.world().resource::<MarbleContacts>();
             let deepest = contacts
                 .as_slice()
@@ -81,7 +99,7 @@ fn main() {
                 .fold(0.0, f32::max);
             let asleep = sim.asleep();
             println!(
-                "{:5.1} s | {fastest:11.4} | {moving:8} | {:19.4} | {:14} | {asleep:6} | {:.0}",
+                "{:5.1} s | {fastest:11.4} | {moving:8} | {out:3} | {:19.4} | {:14} | {asleep:6} | {:.0}",
                 step as f32 * scene.dt,
                 deepest / r,
                 contacts.len(),
