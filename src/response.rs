@@ -1012,14 +1012,22 @@ impl Hold {
         if u <= self.speed {
             return true;
         }
-        if u >= self.threshold {
+        if u >= self.threshold && gap >= 0.0 {
             return false;
         }
         let pull = pull();
         if pull >= 0.0 {
             return false;
         }
-        let disc = (u * u - 2.0 * pull * gap).max(0.0);
+        let disc = u * u - 2.0 * pull * gap;
+        if disc < 0.0 {
+            // Inside the surface (`gap < 0`), turned back before it gets out: it never
+            // leaves, however fast it starts.
+            return true;
+        }
+        if u >= self.threshold {
+            return false;
+        }
         let back = disc.sqrt();
         back < self.threshold && u + back <= -pull * self.span
     }
