@@ -9,7 +9,7 @@
 //! Reads the median time per step of every benchmark from `target/criterion` and
 //! `bench-rapier/target/criterion`, divides by the number of marbles, prints a markdown
 //! table per bench scene (ns per marble-step; rapier's time over this engine's), with
-//! the labyrinth from where it is after 5 s (`labyrinth_steady`) as rows of its own, and
+//! the pour at the pile bar (`pour_box_bar`, against rapier's default) and the labyrinth from where it is after 5 s (`labyrinth_steady`) as rows of its own, and
 //! draws ns per marble-step against N, log–log, for both engines and the fused loop.
 
 use std::path::Path;
@@ -60,23 +60,26 @@ fn cell(v: Option<f64>) -> String {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let ours = Path::new("target/criterion");
     let rapier = Path::new("bench-rapier/target/criterion/rapier");
+    // Title, this engine's id, rapier's id: (b) at the pile bar is this engine at
+    // `scenes::POUR_BOX_BAR_SUBSTEPS` against rapier at its default.
     let scenes = [
-        ("(a) walled board", "walled_board"),
-        ("(b) pour box", "pour_box"),
-        ("(c) labyrinth", "labyrinth"),
+        ("(a) walled board", "walled_board", "walled_board"),
+        ("(b) pour box, 8 substeps", "pour_box", "pour_box"),
+        ("(b) pour box at the pile bar", "pour_box_bar", "pour_box"),
+        ("(c) labyrinth", "labyrinth", "labyrinth"),
     ];
     println!(
         "ns per marble-step (median of one criterion run each; ratio = rapier / this engine)\n"
     );
     println!("| scene | N | this engine | rapier3d | ratio | fused loop |");
     println!("| --- | --- | --- | --- | --- | --- |");
-    for (title, name) in scenes {
+    for (title, name, rapier_name) in scenes {
         for n in SIZES {
             let us = per_marble(&ours.join("marble_collisions"), name, n);
             let off = (name == "walled_board")
                 .then(|| per_marble(ours, "walled_board", n))
                 .flatten();
-            let them = per_marble(rapier, name, n);
+            let them = per_marble(rapier, rapier_name, n);
             let fused = (name == "walled_board")
                 .then(|| per_marble(ours, "fused_loop", n))
                 .flatten();
