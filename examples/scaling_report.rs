@@ -65,7 +65,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scenes = [
         ("(a) walled board", "walled_board", "walled_board"),
         ("(b) pour box, 8 substeps", "pour_box", "pour_box"),
-        ("(b) pour box at the pile bar", "pour_box_bar", "pour_box"),
+        (
+            "(b) pour box, 3 substeps (the pile bar)",
+            "pour_box_bar",
+            "pour_box",
+        ),
         ("(c) labyrinth", "labyrinth", "labyrinth"),
     ];
     println!(

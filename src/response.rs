@@ -1020,15 +1020,12 @@ impl Hold {
             return false;
         }
         let disc = u * u - 2.0 * pull * gap;
-        if disc < 0.0 {
+        if u >= self.threshold {
             // Inside the surface (`gap < 0`), turned back before it gets out: it never
             // leaves, however fast it starts.
-            return true;
+            return disc < 0.0;
         }
-        if u >= self.threshold {
-            return false;
-        }
-        let back = disc.sqrt();
+        let back = disc.max(0.0).sqrt();
         back < self.threshold && u + back <= -pull * self.span
     }
 }

@@ -204,11 +204,11 @@ pub fn pour_box_sleeping(n: usize) -> Scene {
 /// The fewest substeps of bench scene (b)'s 1/60 s step (at its 15 solver passes) at
 /// which its pour meets the pile bar, and four starts in five do: after 6 s, no marble at
 /// 5 cm/s or more, none out of the box or under the floor, the deepest overlap under 5% of
-/// the radius. At 1,000 marbles the scene's own start ends at 3.0 cm/s with overlaps of
-/// 0.6% of r, and twelve of fifteen starts meet the bar (the others at 5.7–6.7 cm/s); at 2
-/// substeps eight do; at 10,000 marbles the scene's own start meets it at 4.8 cm/s, as wide
-/// piles stir longer (`examples/marble_pile.rs`, `docs/pair-solver.md`, "What piles
-/// need"). The criterion group `marble_collisions` times it as `pour_box_bar`.
+/// the radius. At 1,000 marbles the scene's own start ends at 0.9 cm/s with overlaps of
+/// 0.7% of r, and thirteen of fifteen starts meet the bar (the others at 5.4 and
+/// 10.8 cm/s); at 2 substeps nine do, the scene's own start not among them; at 4, all
+/// fifteen (`examples/marble_pile.rs`, `docs/pair-solver.md`, "What piles need"). The
+/// criterion group `marble_collisions` times it as `pour_box_bar`.
 pub const POUR_BOX_BAR_SUBSTEPS: u32 = 3;
 
 /// The three bench scenes, shared by the criterion benches, the tests, the rapier
