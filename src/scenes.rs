@@ -204,10 +204,10 @@ pub fn pour_box_sleeping(n: usize) -> Scene {
 /// The fewest substeps of bench scene (b)'s 1/60 s step (at its 15 solver passes) at
 /// which its pour meets the pile bar, and four starts in five do: after 6 s, no marble at
 /// 5 cm/s or more, none out of the box or under the floor, the deepest overlap under 5% of
-/// the radius. At 1,000 marbles the scene's own start ends at 0.9 cm/s with overlaps of
-/// 0.7% of r, and thirteen of fifteen starts meet the bar (the others at 5.4 and
-/// 10.8 cm/s); at 2 substeps nine do, the scene's own start not among them; at 4, all
-/// fifteen (`examples/marble_pile.rs`, `docs/pair-solver.md`, "What piles need"). The
+/// the radius. At 1,000 marbles the scene's own start ends at 4.7 cm/s with overlaps of
+/// 0.95% of r, and thirteen of fifteen starts meet the bar (the others at 5.2 and
+/// 7.6 cm/s); at 2 substeps nine do (the scene's own start among them, but not four in
+/// five); at 4, fourteen (`examples/marble_pile.rs`, `docs/pair-solver.md`, "What piles need"). The
 /// criterion group `marble_collisions` times it as `pour_box_bar`.
 pub const POUR_BOX_BAR_SUBSTEPS: u32 = 3;
 

@@ -225,6 +225,9 @@ impl PairSolver {
             }
         }
         self.late.truncate(kept);
+        // Earliest first, so that a marble's later impact sees what its earlier one did.
+        self.late
+            .sort_by(|a, b| a.t.total_cmp(&b.t).then((a.i, a.j).cmp(&(b.i, b.j))));
         let mut any = false;
         for row in self.late.iter_mut() {
             let (i, j) = (row.i as usize, row.j as usize);
@@ -237,8 +240,8 @@ impl PairSolver {
                 self.bodies[j].v += (impulse * wj) * row.n;
                 self.bodies[i].x -= (impulse * wi * rest) * row.n;
                 self.bodies[j].x += (impulse * wj * rest) * row.n;
-                self.event[i] = row.t;
-                self.event[j] = row.t;
+                self.event[i] = self.event[i].max(row.t);
+                self.event[j] = self.event[j].max(row.t);
                 self.changed[i] = true;
                 self.changed[j] = true;
                 row.collided = true;
