@@ -174,7 +174,7 @@ pub fn pour_box(n: usize) -> Scene {
         // of its radius, and a crash of ten layers then leaves overlaps the solver cannot
         // take out; at 1/480 s with 15 (over-relaxed) solver passes the pile settles, with
         // overlaps at the 0.2% slop: in each of fifteen starts the last marble above 5 cm/s
-        // stopped by 4.8 s, and from 6 s to 9 s none moved faster than about 1 mm/s
+        // stopped by 5.4 s (thirteen by 3.2 s), and at 6 s none moved faster than 1.1 mm/s
         // (measured with `examples/marble_pile.rs`; `docs/pair-solver.md`, "What piles need").
         substeps: 8,
         solver_iterations: 15,
