@@ -353,8 +353,10 @@ pub struct PairSolver {
     board_gs: Vec<BoardGs>,
     /// Bodies whose state the stage changed.
     changed: Vec<bool>,
-    /// Marble count the buffers were sized for.
+    /// Marble count the broad phase's buffers were sized for, and the rest (the bodies,
+    /// rows and warm-start impulses, sized the first time two marbles may meet).
     reserved_for: usize,
+    pile_reserved_for: usize,
     /// Test only: check every late-pair search against re-pairing every marble, and count
     /// the checks by search.
     #[cfg(test)]
@@ -397,6 +399,10 @@ impl PairSolver {
 
     /// Phase 2: forgets the last substep's bodies.
     pub fn clear_bodies(&mut self) {
+        let n = self.spheres.len();
+        if n > self.pile_reserved_for {
+            self.reserve_pile(n);
+        }
         self.bodies.clear();
         self.free_ends.clear();
     }
@@ -681,10 +687,28 @@ impl PairSolver {
         }
     }
 
-    /// Sizes every buffer for `n` marbles in a dense pile (a marble touches at most 12
-    /// others; rows count each pair once), so that stepping allocates nothing once the
-    /// number of marbles stops growing.
+    /// Sizes the broad phase's buffers for `n` marbles (every substep needs them).
     fn reserve(&mut self, n: usize, out: &mut MarbleContacts) {
+        // Marbles touch a board or two at most, mostly none; a settled pile has about 3
+        // touching pairs per marble (records count each pair once).
+        out.list.reserve(4 * n + 64);
+        self.bound.reserve(n);
+        self.spheres.reserve(n);
+        self.stray.reserve(n);
+        self.radii.reserve(n);
+        self.gathered.reserve(n);
+        self.paths.reserve(n);
+        self.strays.reserve(n);
+        self.entities.reserve(n);
+        self.grid.reserve(n);
+        self.reserved_for = n;
+    }
+
+    /// Sizes every other buffer for `n` marbles in a dense pile (a marble touches at most
+    /// 12 others; rows count each pair once), the first time two of them may meet: so
+    /// that marbles spread over a board (which never do) hold none of it, and stepping
+    /// allocates nothing once the number of marbles stops growing.
+    fn reserve_pile(&mut self, n: usize) {
         // A settled pile has about 3 touching pairs and 6 candidate pairs per marble (a
         // marble touches at most 12 others, each pair counted once); marbles touch a
         // board or two at most, mostly none. Buffers that outgrow this grow once and stay.
@@ -698,7 +722,6 @@ impl PairSolver {
         self.moved.reserve(n);
         self.late_bodies.reserve(n);
         self.candidates.reserve(2 * pairs);
-        self.entities.reserve(n);
         self.late.reserve(n);
         self.first.reserve(n);
         self.adjacency.reserve(2 * pairs);
@@ -716,7 +739,6 @@ impl PairSolver {
         self.push_left.reserve(n);
         self.warm.reserve(pairs + touches);
         self.warm_next.reserve(pairs + touches);
-        out.list.reserve(pairs);
         self.board_touches.reserve(touches);
         self.touch_start.reserve(n + 1);
         self.adjacency_start.reserve(n + 1);
@@ -724,18 +746,10 @@ impl PairSolver {
         self.event.reserve(n);
         self.free_ends.reserve(n);
         self.in_contact.reserve(n);
-        self.bound.reserve(n);
-        self.spheres.reserve(n);
-        self.stray.reserve(n);
-        self.radii.reserve(n);
-        self.gathered.reserve(n);
-        self.paths.reserve(n);
-        self.strays.reserve(n);
         self.extra.reserve(pairs);
         self.scratch_bound.reserve(n);
-        self.grid.reserve(n);
         self.scratch_grid.reserve(n);
-        self.reserved_for = n;
+        self.pile_reserved_for = n;
     }
 }
 
