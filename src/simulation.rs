@@ -8,7 +8,7 @@ use crate::components::{
     Radius, Restitution, RollingResistance, Rotation, Sensor, SpinDamping, Velocity,
 };
 use crate::config::GravityTilt;
-use crate::scene::{Scene, SceneError, quat};
+use crate::scene::{MarbleDesc, Scene, SceneError, quat};
 use crate::schedule::{init_resources, run_step, substep_schedule};
 
 /// A scene's `World` and the physics schedule. Stepping one marble or a million goes
@@ -93,31 +93,37 @@ pub fn spawn_scene(scene: &Scene, world: &mut World) -> SceneEntities {
                 .id()
         })
         .collect();
-    let marbles = scene
-        .marbles
-        .iter()
-        .map(|m| {
-            let mut marble = world.spawn((
-                Marble,
-                Position(Vec3::from_array(m.position)),
-                Velocity(Vec3::from_array(m.velocity)),
-                Radius(m.radius),
-                m.mass.map_or_else(|| Mass::glass(m.radius), Mass::new),
-                Restitution(m.restitution),
-                Friction(m.friction),
-            ));
-            // Spin exists only when the scene asks for rolling.
-            if scene.rolling {
-                marble.insert((
+    // One batch, so that the marbles' table is sized for them at once (spawned one by one,
+    // its columns grow by doubling, up to twice the memory they need).
+    let marble = |m: &MarbleDesc| {
+        (
+            Marble,
+            Position(Vec3::from_array(m.position)),
+            Velocity(Vec3::from_array(m.velocity)),
+            Radius(m.radius),
+            m.mass.map_or_else(|| Mass::glass(m.radius), Mass::new),
+            Restitution(m.restitution),
+            Friction(m.friction),
+        )
+    };
+    // Spin exists only when the scene asks for rolling.
+    let marbles: Vec<Entity> = if scene.rolling {
+        world
+            .spawn_batch(scene.marbles.iter().map(|m| {
+                (
+                    marble(m),
                     AngularVelocity(Vec3::from_array(m.angular_velocity)),
                     Rotation::default(),
                     RollingResistance(m.rolling_resistance),
                     SpinDamping(m.spin_damping),
-                ));
-            }
-            marble.id()
-        })
-        .collect();
+                )
+            }))
+            .collect()
+    } else {
+        world
+            .spawn_batch(scene.marbles.iter().map(marble))
+            .collect()
+    };
     let sensors = scene
         .sensors
         .iter()

@@ -45,9 +45,10 @@ static GLOBAL: Counting = Counting;
 fn memory_per_marble() {
     let n = 20_000;
     for (kind, collisions, bound) in [
-        (BenchScene::WalledBoard, false, 1_100),
-        // Marbles that never meet hold none of the pair solver's pile buffers.
-        (BenchScene::WalledBoard, true, 1_500),
+        (BenchScene::WalledBoard, false, 750),
+        // Marbles that never meet hold none of the pair solver's pile buffers: at most
+        // 1 KiB a marble.
+        (BenchScene::WalledBoard, true, 1_024),
         (BenchScene::PourBox, true, 4_000),
         (BenchScene::Labyrinth, true, 4_000),
     ] {

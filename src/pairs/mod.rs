@@ -374,7 +374,11 @@ impl PairSolver {
     /// records) is only sized.
     pub fn begin(&mut self, n: usize, out: &mut MarbleContacts) {
         if n > self.reserved_for {
-            self.reserve(n, out);
+            self.reserve(n);
+        }
+        // The records are the pile's too (see `reserve_pile`), sized once it is.
+        if self.pile_reserved_for >= n && out.list.capacity() < 4 * n + 64 {
+            out.list.reserve(4 * n + 64 - out.list.len());
         }
         self.spheres.clear();
         self.radii.clear();
@@ -688,10 +692,7 @@ impl PairSolver {
     }
 
     /// Sizes the broad phase's buffers for `n` marbles (every substep needs them).
-    fn reserve(&mut self, n: usize, out: &mut MarbleContacts) {
-        // Marbles touch a board or two at most, mostly none; a settled pile has about 3
-        // touching pairs per marble (records count each pair once).
-        out.list.reserve(4 * n + 64);
+    fn reserve(&mut self, n: usize) {
         self.bound.reserve(n);
         self.spheres.reserve(n);
         self.stray.reserve(n);
@@ -705,7 +706,8 @@ impl PairSolver {
     }
 
     /// Sizes every other buffer for `n` marbles in a dense pile (a marble touches at most
-    /// 12 others; rows count each pair once), the first time two of them may meet: so
+    /// 12 others; rows count each pair once), the first time two of them may meet (and the
+    /// stage's records, [`MarbleContacts`], at the next stage's start): so
     /// that marbles spread over a board (which never do) hold none of it, and stepping
     /// allocates nothing once the number of marbles stops growing.
     fn reserve_pile(&mut self, n: usize) {
