@@ -67,7 +67,7 @@ fn parallel_feature_is_bit_identical() {
 /// in both builds.
 #[test]
 fn parallel_sleeping_is_bit_identical() {
-    const PINNED: u64 = 0xe4f1_7f01_bb1b_bc75;
+    const PINNED: u64 = 0x0077_92c6_c1b6_f002;
     let mut scene = scenes::walled_board(1100);
     scene.marble_collisions = true;
     scene.sleep_speed = 0.05;

@@ -6,6 +6,11 @@ use super::*;
 /// Most pieces a [`NearPieces`] list holds.
 pub const NEAR_MAX: usize = 5;
 
+/// A list that holds one flat face of a still board reaches up to this many radii (less
+/// where another piece or the face's edge is nearer), however short the motion it was
+/// built for: a marble sliding on a wide floor keeps its list for many substeps.
+const FACE_SKIN: f32 = 16.0;
+
 /// The pieces of one board near a marble, so that its queries visit those instead of
 /// searching the board: a Verlet list (a "skin") for board pieces.
 ///
@@ -479,6 +484,43 @@ impl NearPieces {
         {
             self.face_normal = b.rotation * n;
             self.face_gap = found.kept[0].2;
+            // A marble on the face (not one falling onto it, whose list lasts a substep or
+            // two whatever its reach).
+            if self.face_gap <= tol {
+                self.extend_face(b, id, r, tol + FACE_SKIN * r);
+            }
+        }
+    }
+
+    /// Widens a list that holds one flat face `id` of the still board `b`, built for a
+    /// marble on it, to the nearest other piece of that board, or to `limit`, while the
+    /// face stays flat under every centre it covers: such a list stands until the marble
+    /// nears another piece or the face's edge, not only for the few substeps of motion it
+    /// was built for.
+    fn extend_face(&mut self, b: &BoardSnapshot, id: PieceId, r: f32, limit: f32) {
+        if limit <= self.reach {
+            return;
+        }
+        let (bi, anchor) = (self.board as usize, self.anchor);
+        let mut next = limit;
+        b.geometry
+            .for_each_piece(&sphere_aabb(anchor, r + limit), |part, sub, piece| {
+                if PieceId::new(bi, part, sub) != id {
+                    let gap = b
+                        .geometry
+                        .proximity(part, piece, anchor, Vec3::ZERO)
+                        .distance
+                        - r;
+                    next = next.min(gap);
+                }
+            });
+        let reach = next - 8.0 * f32::EPSILON * (r + next + anchor.abs().max_element());
+        if reach > self.reach
+            && b.geometry
+                .flat_face(id.part(), id.sub(), anchor, reach)
+                .is_some()
+        {
+            self.reach = reach;
         }
     }
 }
