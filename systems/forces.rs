@@ -17,8 +17,15 @@ pub fn accumulate_forces(
     >,
 ) {
     let g = tilt.map_or(config.gravity, |t| t.gravity(config.gravity));
-    for (force, mass, mut acceleration) in &mut marbles {
-        acceleration.0 = g + force.0 * mass.inverse();
+    // Table by table, over the columns as slices: the accelerations' change ticks are set
+    // in one pass, not one write per marble.
+    let tables = marbles
+        .contiguous_iter_mut()
+        .expect("a marble's components are stored in tables");
+    for (force, mass, mut acceleration) in tables {
+        for ((f, m), a) in force.iter().zip(mass).zip(acceleration.iter_mut()) {
+            a.0 = g + f.0 * m.inverse();
+        }
     }
 }
 

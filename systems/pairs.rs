@@ -161,7 +161,7 @@ fn write_back(
 
 /// What the contact stage (`PairContacts`) reads and writes of a marble.
 #[derive(QueryData)]
-#[query_data(mutable)]
+#[query_data(mutable, contiguous(immutable))]
 pub struct PairContactStaged {
     entity: Entity,
     position: &'static mut Position,
@@ -179,7 +179,7 @@ pub struct PairContactStaged {
 
 /// What the impact stage (`PairImpacts`) reads and writes of a marble.
 #[derive(QueryData)]
-#[query_data(mutable)]
+#[query_data(mutable, contiguous(immutable))]
 pub struct PairImpactStaged {
     entity: Entity,
     position: &'static mut Position,
@@ -210,36 +210,63 @@ pub fn pair_contacts(
     // 1. The broad phase first: marbles spread apart stop there.
     recorded.list.clear();
     solver.begin(marbles.iter().len(), &mut recorded);
-    for m in &marbles {
-        let d = free_path(&config, h, m.velocity.0, m.acceleration.0, m.contacts);
-        let sphere = PairSolver::contact_sphere(&params, m.position.0, d, m.radius.0);
-        solver.push_sphere(m.entity, sphere, m.radius.0);
-        solver.push_free_path(d);
+    // Table by table, over the columns as slices (the order of the query's items).
+    let tables = marbles
+        .contiguous_iter()
+        .expect("a marble's components are stored in tables");
+    for t in tables {
+        let rows = t
+            .entity
+            .iter()
+            .zip(t.position)
+            .zip(t.velocity)
+            .zip(t.acceleration)
+            .zip(t.radius)
+            .zip(t.contacts);
+        for (((((&entity, x), v), a), r), contacts) in rows {
+            let d = free_path(&config, h, v.0, a.0, contacts);
+            let sphere = PairSolver::contact_sphere(&params, x.0, d, r.0);
+            solver.push_sphere(entity, sphere, r.0);
+            solver.push_free_path(d);
+        }
     }
     if !solver.cover_gathered() {
         solver.forget_contacts();
         return;
     }
-    // 2. The bodies at the substep's start, each on the free path pushed with its sphere.
-    // (A plain loop: through `enumerate` or `zip` the compiler leaves the query's `next` a
-    // call per marble.)
+    // 2. The bodies at the substep's start, each on the free path pushed with its sphere,
+    // in the same table order.
     solver.clear_bodies();
-    for m in &marbles {
-        solver.push_body_on_free_path(Body {
-            entity: m.entity,
-            x: m.position.0,
-            x0: m.position.0,
-            v: m.velocity.0,
-            v0: m.velocity.0,
-            w: m.mass.inverse(),
-            r: m.radius.0,
-            e: m.restitution.0,
-            a: m.acceleration.0,
-            d: Vec3::ZERO,
-            omega: m.spin.as_ref().map_or(Vec3::ZERO, |w| w.0),
-            spins: config.rolling && m.spin.is_some(),
-            mu: m.friction.map_or(0.0, |f| f.0),
-        });
+    let tables = marbles
+        .contiguous_iter()
+        .expect("a marble's components are stored in tables");
+    for t in tables {
+        let rows = t
+            .entity
+            .iter()
+            .zip(t.position)
+            .zip(t.velocity)
+            .zip(t.mass)
+            .zip(t.radius)
+            .zip(t.restitution)
+            .zip(t.acceleration);
+        for (i, ((((((&entity, x), v), mass), r), e), a)) in rows.enumerate() {
+            solver.push_body_on_free_path(Body {
+                entity,
+                x: x.0,
+                x0: x.0,
+                v: v.0,
+                v0: v.0,
+                w: mass.inverse(),
+                r: r.0,
+                e: e.0,
+                a: a.0,
+                d: Vec3::ZERO,
+                omega: t.spin.map_or(Vec3::ZERO, |w| w[i].0),
+                spins: config.rolling && t.spin.is_some(),
+                mu: t.friction.map_or(0.0, |f| f[i].0),
+            });
+        }
     }
     if !solver.find_touching(&params) {
         return;
@@ -313,31 +340,51 @@ pub fn pair_impacts(
     // 1. The broad phase first, on the paths the marbles took: marbles spread apart stop
     // there.
     solver.begin(marbles.iter().len(), &mut recorded);
-    for m in &marbles {
-        let sphere = PairSolver::impact_sphere(&params, m.start.position, m.position.0, m.radius.0);
-        solver.push_sphere(m.entity, sphere, m.radius.0);
+    let tables = marbles
+        .contiguous_iter()
+        .expect("a marble's components are stored in tables");
+    for t in tables {
+        let rows = t.entity.iter().zip(t.start).zip(t.position).zip(t.radius);
+        for (((&entity, start), x), r) in rows {
+            let sphere = PairSolver::impact_sphere(&params, start.position, x.0, r.0);
+            solver.push_sphere(entity, sphere, r.0);
+        }
     }
     if !solver.cover_gathered() {
         return;
     }
     // 2. The bodies: where each marble started the substep and where it ended.
     solver.clear_bodies();
-    for m in &marbles {
-        solver.push_body(Body {
-            entity: m.entity,
-            x: m.position.0,
-            x0: m.start.position,
-            v: m.velocity.0,
-            v0: m.start.velocity,
-            w: m.mass.inverse(),
-            r: m.radius.0,
-            e: m.restitution.0,
-            a: Vec3::ZERO,
-            d: Vec3::ZERO,
-            omega: Vec3::ZERO,
-            spins: false,
-            mu: 0.0,
-        });
+    let tables = marbles
+        .contiguous_iter()
+        .expect("a marble's components are stored in tables");
+    for t in tables {
+        let rows = t
+            .entity
+            .iter()
+            .zip(t.position)
+            .zip(t.start)
+            .zip(t.velocity)
+            .zip(t.mass)
+            .zip(t.radius)
+            .zip(t.restitution);
+        for ((((((&entity, x), start), v), mass), r), e) in rows {
+            solver.push_body(Body {
+                entity,
+                x: x.0,
+                x0: start.position,
+                v: v.0,
+                v0: start.velocity,
+                w: mass.inverse(),
+                r: r.0,
+                e: e.0,
+                a: Vec3::ZERO,
+                d: Vec3::ZERO,
+                omega: Vec3::ZERO,
+                spins: false,
+                mu: 0.0,
+            });
+        }
     }
     if !solver.find_impacts(&params) {
         return;
@@ -346,27 +393,28 @@ pub fn pair_impacts(
     // its boards, and when one first changed its path (a touch found after the substep's
     // start).
     solver.begin_board_touches();
-    for (body, m) in (0usize..).zip(&marbles) {
-        let after = m
-            .contacts
+    let tables = marbles
+        .contiguous_iter()
+        .expect("a marble's components are stored in tables");
+    let mut body = 0u32;
+    for t in tables {
+        let rows = t
+            .start
             .iter()
-            .map(|c| c.time)
-            .filter(|&t| t > 0.0)
-            .fold(f32::INFINITY, f32::min);
-        let (dx, dv) = config
-            .integrator
-            .delta(m.start.velocity, m.acceleration.0, h);
-        solver.push_free_end(after, m.start.position + dx, m.start.velocity + dv);
-        board_touches(
-            solver,
-            &cache,
-            body as u32,
-            m.contacts,
-            m.restitution.0,
-            h,
-            h,
-            None,
-        );
+            .zip(t.acceleration)
+            .zip(t.contacts)
+            .zip(t.restitution);
+        for (((start, a), contacts), e) in rows {
+            let after = contacts
+                .iter()
+                .map(|c| c.time)
+                .filter(|&t| t > 0.0)
+                .fold(f32::INFINITY, f32::min);
+            let (dx, dv) = config.integrator.delta(start.velocity, a.0, h);
+            solver.push_free_end(after, start.position + dx, start.velocity + dv);
+            board_touches(solver, &cache, body, contacts, e.0, h, h, None);
+            body += 1;
+        }
     }
     solver.end_board_touches();
     // 4. Collide, and write back what changed.
