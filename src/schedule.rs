@@ -182,6 +182,7 @@ pub fn init_resources(world: &mut World) {
     world.init_resource::<StepConfig>();
     world.init_resource::<Substep>();
     world.init_resource::<crate::board_contact::BoardCache>();
+    world.init_resource::<crate::systems::board_detection::Flagged>();
     world.init_resource::<crate::pairs::PairSolver>();
     world.init_resource::<crate::pairs::MarbleContacts>();
     world.init_resource::<crate::sleep::SleepState>();

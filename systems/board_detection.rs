@@ -1,6 +1,8 @@
 //! Marble–board detection: collision versus contact (the seed's 衝突 / 接触), the first
 //! impact along the free path, and the closed forms of the commonest case.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use bevy_ecs::prelude::*;
 
 use super::{
@@ -20,6 +22,32 @@ use crate::response::{
     resolve_rolling,
 };
 
+/// Whether detection flagged any marble for the response stage this substep, one flag for
+/// the marbles that do not spin and one for those that do: a response system whose
+/// detection flagged none iterates nothing (most substeps of spread marbles, every one of
+/// which detection resolves in closed form).
+#[derive(Resource, Default)]
+pub struct Flagged {
+    smooth: AtomicBool,
+    spinning: AtomicBool,
+}
+
+impl Flagged {
+    /// True when the detection of the marbles that spin (`spinning`) or of those that do
+    /// not flagged any since the last call, which clears the flag.
+    pub(crate) fn take(&self, spinning: bool) -> bool {
+        self.flag(spinning).swap(false, Ordering::Relaxed)
+    }
+
+    fn flag(&self, spinning: bool) -> &AtomicBool {
+        if spinning {
+            &self.spinning
+        } else {
+            &self.smooth
+        }
+    }
+}
+
 /// A rebuilt [`NearPieces`] list reaches this many substeps of the marble's motion beyond
 /// it (within two and eight radii; a marble moving more than four radii a substep gets
 /// none): rebuilt every few substeps at most, short enough to hold only the pieces around
@@ -38,9 +66,10 @@ pub fn detect_board_contacts(
     config: Res<StepConfig>,
     substep: Res<Substep>,
     cache: Res<BoardCache>,
+    flagged: Res<Flagged>,
     mut marbles: Query<BoardStaged, Smooth>,
 ) {
-    let stage = Stage::new(&config, &cache, substep.h);
+    let stage = Stage::new(&config, &cache, flagged.flag(false), substep.h);
     let each = |touches: &mut TouchList, m: BoardStagedItem<'_, '_>| {
         let material = smooth_material(m.restitution);
         stage.detect_staged(touches, m, None, material);
@@ -56,9 +85,10 @@ pub fn detect_board_contacts_spinning(
     config: Res<StepConfig>,
     substep: Res<Substep>,
     cache: Res<BoardCache>,
+    flagged: Res<Flagged>,
     mut marbles: Query<(BoardStaged, SpinStaged), Stepped>,
 ) {
-    let stage = Stage::new(&config, &cache, substep.h);
+    let stage = Stage::new(&config, &cache, flagged.flag(true), substep.h);
     let each = |touches: &mut TouchList,
                 (m, s): (BoardStagedItem<'_, '_>, SpinStagedItem<'_, '_>)| {
         let material = s.material(m.restitution);
@@ -79,19 +109,29 @@ type MarbleState<'w> = (
 struct Stage<'a> {
     config: &'a StepConfig,
     cache: &'a BoardCache,
+    /// Set when a marble is flagged for the response stage.
+    flagged: &'a AtomicBool,
     params: SubstepParams,
     /// The substep's length, s.
     h: f32,
 }
 
 impl<'a> Stage<'a> {
-    fn new(config: &'a StepConfig, cache: &'a BoardCache, h: f32) -> Self {
+    fn new(config: &'a StepConfig, cache: &'a BoardCache, flagged: &'a AtomicBool, h: f32) -> Self {
         Stage {
             config,
             cache,
+            flagged,
             params: SubstepParams::from_config(config, h),
             h,
         }
+    }
+
+    /// Flags a marble for the response stage with what it is to resolve.
+    #[inline(always)]
+    fn flag(&self, contacts: &mut Contacts, pending: Pending) {
+        contacts.pending = pending;
+        self.flagged.store(true, Ordering::Relaxed);
     }
 
     /// [`Stage::detect`] for a marble's staged components, handed over one by one (always
@@ -309,9 +349,12 @@ impl<'a> Stage<'a> {
                     piece: tc.piece,
                 });
             }
-            contacts.pending = Pending::Touching {
-                complete: touches.is_complete(),
-            };
+            self.flag(
+                contacts,
+                Pending::Touching {
+                    complete: touches.is_complete(),
+                },
+            );
         } else if config.ccd {
             let path = Path {
                 t0: 0.0,
@@ -320,7 +363,7 @@ impl<'a> Stage<'a> {
                 a: acceleration.0,
             };
             if let Some((tau, _)) = earliest_impact(boards, near, &path, h, r, tol, touches) {
-                contacts.pending = Pending::Impact(tau);
+                self.flag(contacts, Pending::Impact(tau));
             }
         } else {
             let tol_end = touch_tolerance(config.contact_tolerance, r, position.0);
@@ -336,7 +379,7 @@ impl<'a> Stage<'a> {
                 touches,
             );
             if touches.as_slice().iter().any(|t| t.gap < 0.0) {
-                contacts.pending = Pending::Overlap;
+                self.flag(contacts, Pending::Overlap);
             }
         }
     }

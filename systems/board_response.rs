@@ -3,6 +3,7 @@
 
 use bevy_ecs::prelude::*;
 
+use super::board_detection::Flagged;
 use super::{
     BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped, smooth_material,
 };
@@ -23,8 +24,12 @@ pub fn respond_to_boards(
     config: Res<StepConfig>,
     substep: Res<Substep>,
     cache: Res<BoardCache>,
+    flagged: Res<Flagged>,
     mut marbles: Query<BoardStaged, Smooth>,
 ) {
+    if !flagged.take(false) {
+        return;
+    }
     let boards = cache.boards.as_slice();
     let params = SubstepParams::from_config(&config, substep.h);
     let each = |touches: &mut TouchList, mut m: BoardStagedItem<'_, '_>| {
@@ -55,8 +60,12 @@ pub fn respond_to_boards_spinning(
     config: Res<StepConfig>,
     substep: Res<Substep>,
     cache: Res<BoardCache>,
+    flagged: Res<Flagged>,
     mut marbles: Query<(BoardStaged, SpinStaged), Stepped>,
 ) {
+    if !flagged.take(true) {
+        return;
+    }
     let boards = cache.boards.as_slice();
     let params = SubstepParams::from_config(&config, substep.h);
     let each = |touches: &mut TouchList,
