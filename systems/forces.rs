@@ -36,6 +36,21 @@ pub fn last_substep(substep: Res<Substep>) -> bool {
 
 /// Clears every marble's [`Force`] once the whole step has integrated it.
 pub fn clear_forces(mut forces: Query<&mut Force, (With<Marble>, Without<Sleeping>)>) {
+    // Most scenes apply no force: the columns are read as slices first (the bits of each
+    // component, less its sign, or-ed: zero only when every force is ±0), and only a marble
+    // whose force is not zero is written (its change tick set).
+    let any = forces
+        .contiguous_iter()
+        .expect("a marble's components are stored in tables")
+        .any(|f| {
+            let bits = f.iter().fold(0u32, |bits, f| {
+                bits | f.0.x.to_bits() | f.0.y.to_bits() | f.0.z.to_bits()
+            });
+            bits << 1 != 0
+        });
+    if !any {
+        return;
+    }
     for mut force in &mut forces {
         if force.0 != glam::Vec3::ZERO {
             force.0 = glam::Vec3::ZERO;
