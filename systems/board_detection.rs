@@ -70,11 +70,48 @@ pub fn detect_board_contacts(
     mut marbles: Query<BoardStaged, Smooth>,
 ) {
     let stage = Stage::new(&config, &cache, flagged.flag(false), substep.h);
-    let each = |touches: &mut TouchList, m: BoardStagedItem<'_, '_>| {
-        let material = smooth_material(m.restitution);
-        stage.detect_staged(touches, m, None, material);
-    };
-    super::for_each_marble!(marbles, each);
+    #[cfg(feature = "parallel")]
+    if marbles.iter().len() >= super::PARALLEL_MIN {
+        marbles.par_iter_mut().for_each(|m| {
+            super::SCRATCH.with_borrow_mut(|touches| {
+                let material = smooth_material(m.restitution);
+                stage.detect_staged(touches, m, None, material);
+            })
+        });
+        return;
+    }
+    // In order, table by table over the columns as slices: the positions', carries' and
+    // velocities' change ticks are set in one pass (detection writes those of the marbles
+    // it resolves, the response those of the others, integration all of them before).
+    let mut touches = TouchList::default();
+    let tables = marbles
+        .contiguous_iter_mut()
+        .expect("a marble's components are stored in tables");
+    for mut t in tables {
+        let rows = t
+            .position
+            .iter_mut()
+            .zip(t.carry.iter_mut())
+            .zip(t.velocity.iter_mut())
+            .zip(t.start)
+            .zip(t.acceleration)
+            .zip(t.radius)
+            .zip(t.restitution)
+            .zip(t.contacts.bypass_change_detection())
+            .zip(t.near.bypass_change_detection());
+        for ((((((((x, carry), v), start), a), r), e), contacts), near) in rows {
+            stage.detect(
+                &mut touches,
+                (x, carry, v, None),
+                start,
+                a,
+                r.0,
+                smooth_material(e),
+                contacts,
+                near,
+            );
+        }
+    }
 }
 
 /// [`detect_board_contacts`] for marbles that carry an [`AngularVelocity`]: with rolling
@@ -99,10 +136,10 @@ pub fn detect_board_contacts_spinning(
 
 /// A marble's motion state, as the detection systems hand it over.
 type MarbleState<'w> = (
-    Mut<'w, Position>,
-    Mut<'w, PositionCarry>,
-    Mut<'w, Velocity>,
-    Option<Mut<'w, AngularVelocity>>,
+    &'w mut Position,
+    &'w mut PositionCarry,
+    &'w mut Velocity,
+    Option<&'w mut AngularVelocity>,
 );
 
 /// What every marble's detection shares in a substep.
@@ -144,7 +181,13 @@ impl<'a> Stage<'a> {
         spin: Option<Mut<AngularVelocity>>,
         material: Material,
     ) {
-        let motion = (m.position, m.carry, m.velocity, spin);
+        let motion = (
+            m.position.into_inner(),
+            m.carry.into_inner(),
+            m.velocity.into_inner(),
+            spin.map(Mut::into_inner),
+        );
+        let (mut contacts, mut near) = (m.contacts, m.near);
         self.detect(
             touches,
             motion,
@@ -152,8 +195,8 @@ impl<'a> Stage<'a> {
             m.acceleration,
             m.radius.0,
             material,
-            m.contacts,
-            m.near,
+            contacts.bypass_change_detection(),
+            near.bypass_change_detection(),
         );
     }
 
@@ -196,18 +239,17 @@ impl<'a> Stage<'a> {
     fn detect(
         &self,
         touches: &mut TouchList,
-        (mut position, mut carry, mut velocity, spin): MarbleState<'_>,
+        (position, carry, velocity, spin): MarbleState<'_>,
         start: &StepStart,
         acceleration: &Acceleration,
         r: f32,
         material: Material,
-        mut contacts: Mut<Contacts>,
-        mut near: Mut<NearPieces>,
+        contacts: &mut Contacts,
+        near: &mut NearPieces,
     ) {
         let (config, cache, params) = (self.config, self.cache, &self.params);
         let boards = cache.boards.as_slice();
         let h = self.h;
-        let contacts = contacts.bypass_change_detection();
         contacts.clear();
         if boards.is_empty() {
             return;
@@ -215,7 +257,6 @@ impl<'a> Stage<'a> {
         let tol = touch_tolerance(config.contact_tolerance, r, start.position);
         // The spin, when the marble spins (rolling on and an angular velocity).
         let w0 = spin.as_ref().filter(|_| config.rolling).map(|w| w.0);
-        let near = near.bypass_change_detection();
         // The commonest case of all, a marble that does not spin resting or sliding on a
         // still flat face with nothing else near, when its list vouches for that as it
         // stands (after a rebuild, `lone_touch` finds it).
@@ -312,7 +353,7 @@ impl<'a> Stage<'a> {
                 (position.0, carry.0) =
                     compensated_add(config.compensated, start.position, start.carry, out.d);
                 velocity.0 = out.v;
-                if let Some(mut spin) = spin.filter(|_| config.rolling) {
+                if let Some(spin) = spin.filter(|_| config.rolling) {
                     spin.0 = out.w;
                 }
                 return;

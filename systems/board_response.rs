@@ -10,7 +10,10 @@ use super::{
 use crate::board_contact::{
     BoardCache, BoardSnapshot, NearPieces, TouchList, gather, touch_tolerance,
 };
-use crate::components::{AngularVelocity, Board, Rotation};
+use crate::components::{
+    Acceleration, AngularVelocity, Board, Position, PositionCarry, Radius, Restitution, Rotation,
+    StepStart, Velocity,
+};
 use crate::components::{Contacts, Pending, compensated_add};
 use crate::config::{StepConfig, Substep};
 use crate::response::{Found, MarbleIn, MarbleOut, SubstepParams, resolve};
@@ -32,24 +35,74 @@ pub fn respond_to_boards(
     }
     let boards = cache.boards.as_slice();
     let params = SubstepParams::from_config(&config, substep.h);
-    let each = |touches: &mut TouchList, mut m: BoardStagedItem<'_, '_>| {
-        if m.contacts.pending == Pending::None {
-            return;
-        }
-        let marble = MarbleIn {
-            x0: m.start.position,
-            v0: m.start.velocity,
-            w0: None,
-            a: m.acceleration.0,
-            r: m.radius.0,
-            material: smooth_material(m.restitution),
-        };
-        let out = respond_one(boards, &m.near, &params, &marble, &mut m.contacts, touches);
-        (m.position.0, m.carry.0) =
-            compensated_add(config.compensated, m.start.position, m.start.carry, out.d);
-        m.velocity.0 = out.v;
+    // One flagged marble: its motion over the substep through the event loop.
+    let respond = |touches: &mut TouchList,
+                   (x, carry, v): (&mut Position, &mut PositionCarry, &mut Velocity),
+                   start: &StepStart,
+                   marble: MarbleIn,
+                   contacts: &mut Contacts,
+                   near: &NearPieces| {
+        let out = respond_one(boards, near, &params, &marble, contacts, touches);
+        (x.0, carry.0) = compensated_add(config.compensated, start.position, start.carry, out.d);
+        v.0 = out.v;
     };
-    super::for_each_marble!(marbles, each);
+    let marble = |start: &StepStart, a: &Acceleration, r: &Radius, e: &Restitution| MarbleIn {
+        x0: start.position,
+        v0: start.velocity,
+        w0: None,
+        a: a.0,
+        r: r.0,
+        material: smooth_material(e),
+    };
+    #[cfg(feature = "parallel")]
+    if marbles.iter().len() >= super::PARALLEL_MIN {
+        marbles.par_iter_mut().for_each(|m| {
+            if m.contacts.pending == Pending::None {
+                return;
+            }
+            super::SCRATCH.with_borrow_mut(|touches| {
+                let state = (
+                    m.position.into_inner(),
+                    m.carry.into_inner(),
+                    m.velocity.into_inner(),
+                );
+                let marble = marble(m.start, m.acceleration, m.radius, m.restitution);
+                respond(
+                    touches,
+                    state,
+                    m.start,
+                    marble,
+                    m.contacts.into_inner(),
+                    &m.near,
+                )
+            })
+        });
+        return;
+    }
+    // In order, table by table over the columns as slices (see `detect_board_contacts`).
+    let mut touches = TouchList::default();
+    let tables = marbles
+        .contiguous_iter_mut()
+        .expect("a marble's components are stored in tables");
+    for mut t in tables {
+        let rows = t
+            .position
+            .iter_mut()
+            .zip(t.carry.iter_mut())
+            .zip(t.velocity.iter_mut())
+            .zip(t.start)
+            .zip(t.acceleration)
+            .zip(t.radius)
+            .zip(t.restitution)
+            .zip(t.contacts.iter_mut())
+            .zip(t.near.iter());
+        for ((((((((x, carry), v), start), a), r), e), contacts), near) in rows {
+            if contacts.pending != Pending::None {
+                let marble = marble(start, a, r, e);
+                respond(&mut touches, (x, carry, v), start, marble, contacts, near);
+            }
+        }
+    }
 }
 
 /// [`respond_to_boards`] for marbles that carry an [`AngularVelocity`]: with rolling on,

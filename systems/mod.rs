@@ -40,7 +40,7 @@ pub type Smooth = (Stepped, Without<AngularVelocity>);
 
 /// What the marble–board stages (detection and response) read and write of every marble.
 #[derive(QueryData)]
-#[query_data(mutable)]
+#[query_data(mutable, contiguous(all))]
 pub struct BoardStaged {
     position: &'static mut Position,
     carry: &'static mut PositionCarry,
