@@ -8,6 +8,7 @@
 //! All quantities are SI: metres, seconds, kilograms, radians.
 
 use bevy_ecs::prelude::*;
+use bevy_ecs::query::QueryData;
 #[cfg(feature = "bevy")]
 use bevy_ecs::reflect::ReflectComponent;
 use glam::{Quat, Vec3};
@@ -100,6 +101,7 @@ impl Default for Rotation {
     Friction,
     StepStart,
     Contacts,
+    MoreContacts,
     PositionCarry,
     crate::board_contact::NearPieces
 )]
@@ -463,9 +465,146 @@ pub struct Contact {
 /// boards; further contacts are still resolved, only not recorded.
 pub const MAX_CONTACTS: usize = 4;
 
-/// The contacts of a marble during the last substep (fixed capacity, no allocation).
+/// The board contacts of a marble during the last substep, as a component: how many, whether
+/// any was a collision, and the first of them.
+///
+/// A marble on one piece, the commonest marble, has one contact, and every substep writes
+/// it: the component holds that one (64 bytes), and the others a marble touching several
+/// pieces had are kept apart, in [`MoreContacts`], which the stages visit only for such a
+/// marble. The whole list: a [`BoardContacts`] query item (`Query<BoardContacts>`), or
+/// [`Simulation::contacts`](crate::Simulation::contacts) headless.
 #[derive(Component, Clone, Copy, Debug)]
 pub struct Contacts {
+    len: u8,
+    collision: bool,
+    /// What detection left for the response stage ([`Pending`], packed with
+    /// `pending_time`).
+    pending_kind: u8,
+    /// The time of a [`Pending::Impact`], s.
+    pending_time: f32,
+    first: Contact,
+}
+
+impl Default for Contacts {
+    fn default() -> Self {
+        Contacts {
+            len: 0,
+            collision: false,
+            pending_kind: PENDING_NONE,
+            pending_time: 0.0,
+            first: EMPTY_CONTACT,
+        }
+    }
+}
+
+impl Contacts {
+    /// Number of recorded contacts (all of them, [`MoreContacts`]' included).
+    pub fn len(&self) -> usize {
+        self.len as usize
+    }
+
+    /// True when the marble touched nothing in the last substep.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// True when any recorded contact was a collision.
+    pub fn has_collision(&self) -> bool {
+        self.collision
+    }
+
+    /// The first recorded contact (the only one, for a marble on one piece).
+    pub fn first(&self) -> Option<&Contact> {
+        (self.len > 0).then_some(&self.first)
+    }
+
+    /// What detection left for the response stage.
+    #[inline(always)]
+    pub(crate) fn pending(&self) -> Pending {
+        match self.pending_kind {
+            PENDING_NONE => Pending::None,
+            PENDING_TOUCHING => Pending::Touching { complete: false },
+            PENDING_TOUCHING_COMPLETE => Pending::Touching { complete: true },
+            PENDING_IMPACT => Pending::Impact(self.pending_time),
+            _ => Pending::Overlap,
+        }
+    }
+
+    /// True when detection left nothing for the response stage.
+    #[inline(always)]
+    pub(crate) fn nothing_pending(&self) -> bool {
+        self.pending_kind == PENDING_NONE
+    }
+
+    /// Forgets the recorded contacts and anything pending.
+    pub(crate) fn clear(&mut self) {
+        self.len = 0;
+        self.collision = false;
+        self.pending_kind = PENDING_NONE;
+    }
+}
+
+/// The contacts of a marble beyond the first ([`Contacts`]), in the order recorded: a
+/// column of their own, so that the stages visit it only for the marbles that touch more
+/// than one piece. Read through [`BoardContacts`].
+#[derive(Component, Clone, Copy, Debug)]
+pub struct MoreContacts([Contact; MAX_CONTACTS - 1]);
+
+impl Default for MoreContacts {
+    fn default() -> Self {
+        MoreContacts([EMPTY_CONTACT; MAX_CONTACTS - 1])
+    }
+}
+
+/// A marble's whole board contact list, as a query item: `Query<BoardContacts>`.
+#[derive(QueryData)]
+pub struct BoardContacts {
+    head: &'static Contacts,
+    more: &'static MoreContacts,
+}
+
+impl BoardContactsItem<'_, '_> {
+    /// The recorded contacts, the first first.
+    pub fn iter(&self) -> impl Iterator<Item = &Contact> + '_ {
+        contact_iter(self.head, self.more)
+    }
+
+    /// Number of recorded contacts.
+    pub fn len(&self) -> usize {
+        self.head.len()
+    }
+
+    /// True when the marble touched nothing in the last substep.
+    pub fn is_empty(&self) -> bool {
+        self.head.is_empty()
+    }
+
+    /// True when any recorded contact was a collision.
+    pub fn has_collision(&self) -> bool {
+        self.head.has_collision()
+    }
+
+    /// The list as a value.
+    pub fn list(&self) -> ContactList {
+        ContactList::load(self.head, self.more)
+    }
+}
+
+/// The contacts `head` and `more` record, the first first.
+#[inline]
+pub(crate) fn contact_iter<'a>(
+    head: &'a Contacts,
+    more: &'a MoreContacts,
+) -> impl Iterator<Item = &'a Contact> + 'a {
+    let rest = (head.len as usize).saturating_sub(1);
+    head.first().into_iter().chain(more.0[..rest].iter())
+}
+
+/// A marble's board contacts as one value (fixed capacity, no allocation): what the
+/// marble–board stages build a substep's contacts in, and what [`BoardContacts::list`]
+/// and [`Simulation::contacts`](crate::Simulation::contacts) return.
+#[derive(Clone, Copy, Debug)]
+pub struct ContactList {
     list: [Contact; MAX_CONTACTS],
     len: u8,
     /// Set by detection when the response stage must resolve this marble.
@@ -490,6 +629,13 @@ pub(crate) enum Pending {
     Overlap,
 }
 
+// `Contacts::pending_kind`'s values, one for each [`Pending`].
+const PENDING_NONE: u8 = 0;
+const PENDING_TOUCHING: u8 = 1;
+const PENDING_TOUCHING_COMPLETE: u8 = 2;
+const PENDING_IMPACT: u8 = 3;
+const PENDING_OVERLAP: u8 = 4;
+
 /// Marks a marble whose position or velocity stopped being finite. Quarantined marbles are
 /// skipped by every stage; nothing else is affected.
 #[derive(Component, Clone, Copy, Debug, Default)]
@@ -507,9 +653,9 @@ const EMPTY_CONTACT: Contact = Contact {
     piece: crate::geometry::PieceId::NONE,
 };
 
-impl Default for Contacts {
+impl Default for ContactList {
     fn default() -> Self {
-        Contacts {
+        ContactList {
             list: [EMPTY_CONTACT; MAX_CONTACTS],
             len: 0,
             pending: Pending::None,
@@ -517,7 +663,56 @@ impl Default for Contacts {
     }
 }
 
-impl Contacts {
+impl ContactList {
+    /// The list `head` and `more` record, with what is pending.
+    #[inline]
+    pub(crate) fn load(head: &Contacts, more: &MoreContacts) -> ContactList {
+        let mut list = ContactList::default();
+        list.load_from(head, more);
+        list
+    }
+
+    /// Makes this the list `head` and `more` record, with what is pending (reading
+    /// `more` only when there is more than one contact).
+    #[inline]
+    pub(crate) fn load_from(&mut self, head: &Contacts, more: &MoreContacts) {
+        let len = head.len as usize;
+        self.len = head.len;
+        self.pending = head.pending();
+        if len > 0 {
+            self.list[0] = head.first;
+        }
+        if len > 1 {
+            self.list[1..len].copy_from_slice(&more.0[..len - 1]);
+        }
+    }
+
+    /// Records this list, and what is pending, in `head` and `more` (writing `more` only
+    /// when there is more than one contact).
+    #[inline(always)]
+    pub(crate) fn store(&self, head: &mut Contacts, more: &mut MoreContacts) {
+        let len = self.len as usize;
+        let (pending_kind, pending_time) = match self.pending {
+            Pending::None => (PENDING_NONE, 0.0),
+            Pending::Touching { complete: false } => (PENDING_TOUCHING, 0.0),
+            Pending::Touching { complete: true } => (PENDING_TOUCHING_COMPLETE, 0.0),
+            Pending::Impact(tau) => (PENDING_IMPACT, tau),
+            Pending::Overlap => (PENDING_OVERLAP, 0.0),
+        };
+        // The whole component in one write (the first contact's place is filled whatever
+        // the count: the list keeps what it held there).
+        *head = Contacts {
+            len: self.len,
+            collision: self.has_collision(),
+            pending_kind,
+            pending_time,
+            first: self.list[0],
+        };
+        if len > 1 {
+            more.0[..len - 1].copy_from_slice(&self.list[1..len]);
+        }
+    }
+
     /// The recorded contacts.
     pub fn as_slice(&self) -> &[Contact] {
         &self.list[..self.len as usize]
@@ -592,4 +787,63 @@ pub(crate) fn register_types(app: &mut bevy_app::App) {
         .register_type::<crate::sleep::Drowsy>()
         .register_type::<crate::config::StepConfig>()
         .register_type::<crate::plugin::PhysicsClock>();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn contact(depth: f32, kind: ContactKind) -> Contact {
+        Contact {
+            depth,
+            kind,
+            ..EMPTY_CONTACT
+        }
+    }
+
+    /// What every marble-substep writes of a marble's contacts fits one 64-byte line's
+    /// worth: the count, the collision flag, what is pending and the first contact.
+    #[test]
+    fn the_contacts_component_is_64_bytes() {
+        assert_eq!(std::mem::size_of::<Contacts>(), 64);
+    }
+
+    /// A list stored in the two components and loaded back is the same list, in the same
+    /// order, with the same pending state, for every count; `Contacts` alone tells the
+    /// count, the first contact and whether any was a collision.
+    #[test]
+    fn contacts_round_trip_through_both_components() {
+        let (mut head, mut more) = (Contacts::default(), MoreContacts::default());
+        for n in 0..=MAX_CONTACTS {
+            for pending in [
+                Pending::None,
+                Pending::Touching { complete: false },
+                Pending::Touching { complete: true },
+                Pending::Impact(0.0021),
+                Pending::Overlap,
+            ] {
+                let mut list = ContactList::default();
+                for k in 0..n {
+                    let kind = if k == n - 1 && n > 1 {
+                        ContactKind::Collision
+                    } else {
+                        ContactKind::Contact
+                    };
+                    list.push(contact(0.001 * (k + 1) as f32, kind));
+                }
+                list.pending = pending;
+                list.store(&mut head, &mut more);
+                let back = ContactList::load(&head, &more);
+                assert_eq!(back.as_slice(), list.as_slice(), "{n} contacts");
+                assert_eq!(back.pending, pending);
+                assert_eq!(head.len(), n);
+                assert_eq!(head.has_collision(), n > 1);
+                assert_eq!(head.first(), list.as_slice().first());
+                assert_eq!(head.nothing_pending(), pending == Pending::None);
+                assert!(contact_iter(&head, &more).eq(list.iter()));
+            }
+        }
+        head.clear();
+        assert!(head.is_empty() && !head.has_collision() && head.nothing_pending());
+    }
 }

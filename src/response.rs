@@ -95,7 +95,7 @@ use crate::board_contact::{
     BoardSnapshot, MAX_TOUCHES, Material, NearPieces, Path, Touch, TouchList, earliest_impact,
     gather,
 };
-use crate::components::{Contact, ContactKind, Contacts};
+use crate::components::{Contact, ContactKind, ContactList};
 use crate::config::Integrator;
 
 /// The settings of one substep, copied out of [`crate::config::StepConfig`].
@@ -218,7 +218,7 @@ pub fn resolve(
     m: &MarbleIn,
     found: Found,
     touches: &mut TouchList,
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
 ) -> MarbleOut {
     // Two instances of one loop: a marble that does not spin pays nothing for rolling.
     if m.w0.is_some() {
@@ -236,7 +236,7 @@ fn resolve_with<const SPINS: bool>(
     m: &MarbleIn,
     found: Found,
     touches: &mut TouchList,
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
 ) -> MarbleOut {
     let tol = crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0);
     let hold = Hold::new(p.threshold, p.h);
@@ -276,7 +276,7 @@ fn resolve_with<const SPINS: bool>(
     let at_impact = |t: f32,
                      s: &mut State,
                      touches: &mut TouchList,
-                     contacts: &mut Contacts,
+                     contacts: &mut ContactList,
                      friction: bool| {
         regather(t, s, touches);
         respond::<SPINS>(
@@ -707,7 +707,7 @@ pub fn resolve_resting(
     p: &SubstepParams,
     m: &MarbleIn,
     tc: &Touch,
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
 ) -> Option<MarbleOut> {
     resting::<false>(boards, p, m, tc, contacts)
 }
@@ -723,7 +723,7 @@ pub fn resolve_resting_still(
     p: &SubstepParams,
     m: &MarbleIn,
     tc: &Touch,
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
 ) -> Option<MarbleOut> {
     debug_assert!(
         tc.board_velocity == Vec3::ZERO
@@ -740,7 +740,7 @@ fn resting<const STILL: bool>(
     p: &SubstepParams,
     m: &MarbleIn,
     tc: &Touch,
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
 ) -> Option<MarbleOut> {
     debug_assert!(m.w0.is_none() && tc.convex);
     // `respond`, `settle` and `advance` on one touch, written out: the same operations in
@@ -836,7 +836,7 @@ pub fn resolve_rolling(
     p: &SubstepParams,
     m: &MarbleIn,
     tc: &Touch,
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
 ) -> Option<MarbleOut> {
     let w0 = m.w0?;
     debug_assert!(tc.convex);
@@ -1059,7 +1059,7 @@ fn respond<const SPINS: bool>(
     t: f32,
     lag: f32,
     a: Vec3,
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
 ) {
     if turns(list) {
         respond_on::<SPINS, true>(list, s, threshold, boards, t, lag, a, contacts);
@@ -1088,7 +1088,7 @@ fn respond_on<const SPINS: bool, const TURNING: bool>(
     t: f32,
     lag: f32,
     a: Vec3,
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
 ) {
     let mut target = [f32::NEG_INFINITY; MAX_TOUCHES];
     let mut normal_impulse = [0.0f32; MAX_TOUCHES];
@@ -1511,7 +1511,7 @@ fn stop_at(motion: &mut Motion, after: f32) {
 }
 
 fn record(
-    contacts: &mut Contacts,
+    contacts: &mut ContactList,
     boards: &[BoardSnapshot],
     tc: &Touch,
     kind: ContactKind,

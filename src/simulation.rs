@@ -219,6 +219,16 @@ impl Simulation {
         &self.marbles
     }
 
+    /// The board contacts of `marble` during the last substep, in the order recorded
+    /// (`None` for an entity that is not a marble). [`Contacts`](crate::components::Contacts)
+    /// alone holds how many there were and the first.
+    pub fn contacts(&self, marble: Entity) -> Option<crate::components::ContactList> {
+        let entity = self.world.get_entity(marble).ok()?;
+        let head = entity.get::<crate::components::Contacts>()?;
+        let more = entity.get::<crate::components::MoreContacts>()?;
+        Some(crate::components::ContactList::load(head, more))
+    }
+
     /// The boards of the scene, in its order.
     pub fn boards(&self) -> &[Entity] {
         &self.boards

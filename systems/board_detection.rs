@@ -13,7 +13,7 @@ use crate::board_contact::{
     touch_tolerance,
 };
 use crate::components::{
-    Acceleration, AngularVelocity, Contact, ContactKind, Contacts, Pending, Position,
+    Acceleration, AngularVelocity, Contact, ContactKind, ContactList, Pending, Position,
     PositionCarry, StepStart, Velocity, compensated_add,
 };
 use crate::config::{StepConfig, Substep};
@@ -75,7 +75,8 @@ pub fn detect_board_contacts(
         marbles.par_iter_mut().for_each(|m| {
             super::SCRATCH.with_borrow_mut(|touches| {
                 let material = smooth_material(m.restitution);
-                stage.detect_staged(touches, m, None, material);
+                let mut list = ContactList::default();
+                stage.detect_staged(touches, &mut list, m, None, material);
             })
         });
         return;
@@ -83,7 +84,9 @@ pub fn detect_board_contacts(
     // In order, table by table over the columns as slices: the positions', carries' and
     // velocities' change ticks are set in one pass (detection writes those of the marbles
     // it resolves, the response those of the others, integration all of them before).
-    let mut touches = TouchList::default();
+    // Each marble's contacts are built in one list and stored in its components (the
+    // first contact in `Contacts`, `MoreContacts` only for a marble with more).
+    let (mut touches, mut list) = (TouchList::default(), ContactList::default());
     let tables = marbles
         .contiguous_iter_mut()
         .expect("a marble's components are stored in tables");
@@ -98,8 +101,9 @@ pub fn detect_board_contacts(
             .zip(t.radius)
             .zip(t.restitution)
             .zip(t.contacts.bypass_change_detection())
+            .zip(t.more.bypass_change_detection())
             .zip(t.near.bypass_change_detection());
-        for ((((((((x, carry), v), start), a), r), e), contacts), near) in rows {
+        for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
             stage.detect(
                 &mut touches,
                 (x, carry, v, None),
@@ -107,9 +111,10 @@ pub fn detect_board_contacts(
                 a,
                 r.0,
                 smooth_material(e),
-                contacts,
+                &mut list,
                 near,
             );
+            list.store(contacts, more);
         }
     }
 }
@@ -129,7 +134,8 @@ pub fn detect_board_contacts_spinning(
     let each = |touches: &mut TouchList,
                 (m, s): (BoardStagedItem<'_, '_>, SpinStagedItem<'_, '_>)| {
         let material = s.material(m.restitution);
-        stage.detect_staged(touches, m, Some(s.spin), material);
+        let mut list = ContactList::default();
+        stage.detect_staged(touches, &mut list, m, Some(s.spin), material);
     };
     super::for_each_marble!(marbles, each);
 }
@@ -166,17 +172,19 @@ impl<'a> Stage<'a> {
 
     /// Flags a marble for the response stage with what it is to resolve.
     #[inline(always)]
-    fn flag(&self, contacts: &mut Contacts, pending: Pending) {
+    fn flag(&self, contacts: &mut ContactList, pending: Pending) {
         contacts.pending = pending;
         self.flagged.store(true, Ordering::Relaxed);
     }
 
     /// [`Stage::detect`] for a marble's staged components, handed over one by one (always
-    /// inlined: passing the whole item costs a copy of it per marble).
+    /// inlined: passing the whole item costs a copy of it per marble), its contacts built
+    /// in `list` and stored.
     #[inline(always)]
     fn detect_staged(
         &self,
         touches: &mut TouchList,
+        list: &mut ContactList,
         m: BoardStagedItem<'_, '_>,
         spin: Option<Mut<AngularVelocity>>,
         material: Material,
@@ -187,7 +195,7 @@ impl<'a> Stage<'a> {
             m.velocity.into_inner(),
             spin.map(Mut::into_inner),
         );
-        let (mut contacts, mut near) = (m.contacts, m.near);
+        let (mut contacts, mut more, mut near) = (m.contacts, m.more, m.near);
         self.detect(
             touches,
             motion,
@@ -195,8 +203,12 @@ impl<'a> Stage<'a> {
             m.acceleration,
             m.radius.0,
             material,
-            contacts.bypass_change_detection(),
+            list,
             near.bypass_change_detection(),
+        );
+        list.store(
+            contacts.bypass_change_detection(),
+            more.bypass_change_detection(),
         );
     }
 
@@ -244,7 +256,7 @@ impl<'a> Stage<'a> {
         acceleration: &Acceleration,
         r: f32,
         material: Material,
-        contacts: &mut Contacts,
+        contacts: &mut ContactList,
         near: &mut NearPieces,
     ) {
         let (config, cache, params) = (self.config, self.cache, &self.params);

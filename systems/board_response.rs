@@ -14,7 +14,7 @@ use crate::components::{
     Acceleration, AngularVelocity, Board, Position, PositionCarry, Radius, Restitution, Rotation,
     StepStart, Velocity,
 };
-use crate::components::{Contacts, Pending, compensated_add};
+use crate::components::{ContactList, Contacts, MoreContacts, Pending, compensated_add};
 use crate::config::{StepConfig, Substep};
 use crate::response::{Found, MarbleIn, MarbleOut, SubstepParams, resolve};
 use glam::{Quat, Vec3};
@@ -40,9 +40,9 @@ pub fn respond_to_boards(
                    (x, carry, v): (&mut Position, &mut PositionCarry, &mut Velocity),
                    start: &StepStart,
                    marble: MarbleIn,
-                   contacts: &mut Contacts,
+                   (contacts, more): (&mut Contacts, &mut MoreContacts),
                    near: &NearPieces| {
-        let out = respond_one(boards, near, &params, &marble, contacts, touches);
+        let out = respond_one(boards, near, &params, &marble, (contacts, more), touches);
         (x.0, carry.0) = compensated_add(config.compensated, start.position, start.carry, out.d);
         v.0 = out.v;
     };
@@ -57,7 +57,7 @@ pub fn respond_to_boards(
     #[cfg(feature = "parallel")]
     if marbles.iter().len() >= super::PARALLEL_MIN {
         marbles.par_iter_mut().for_each(|m| {
-            if m.contacts.pending == Pending::None {
+            if m.contacts.nothing_pending() {
                 return;
             }
             super::SCRATCH.with_borrow_mut(|touches| {
@@ -72,7 +72,7 @@ pub fn respond_to_boards(
                     state,
                     m.start,
                     marble,
-                    m.contacts.into_inner(),
+                    (m.contacts.into_inner(), m.more.into_inner()),
                     &m.near,
                 )
             })
@@ -95,11 +95,13 @@ pub fn respond_to_boards(
             .zip(t.radius)
             .zip(t.restitution)
             .zip(t.contacts.iter_mut())
+            .zip(t.more.iter_mut())
             .zip(t.near.iter());
-        for ((((((((x, carry), v), start), a), r), e), contacts), near) in rows {
-            if contacts.pending != Pending::None {
+        for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
+            if !contacts.nothing_pending() {
                 let marble = marble(start, a, r, e);
-                respond(&mut touches, (x, carry, v), start, marble, contacts, near);
+                let stored = (contacts, more);
+                respond(&mut touches, (x, carry, v), start, marble, stored, near);
             }
         }
     }
@@ -123,7 +125,7 @@ pub fn respond_to_boards_spinning(
     let params = SubstepParams::from_config(&config, substep.h);
     let each = |touches: &mut TouchList,
                 (mut m, mut s): (BoardStagedItem<'_, '_>, SpinStagedItem<'_, '_>)| {
-        if m.contacts.pending == Pending::None {
+        if m.contacts.nothing_pending() {
             return;
         }
         let marble = MarbleIn {
@@ -134,7 +136,8 @@ pub fn respond_to_boards_spinning(
             r: m.radius.0,
             material: s.material(m.restitution),
         };
-        let out = respond_one(boards, &m.near, &params, &marble, &mut m.contacts, touches);
+        let stored = (&mut *m.contacts, &mut *m.more);
+        let out = respond_one(boards, &m.near, &params, &marble, stored, touches);
         (m.position.0, m.carry.0) =
             compensated_add(config.compensated, m.start.position, m.start.carry, out.d);
         m.velocity.0 = out.v;
@@ -146,15 +149,17 @@ pub fn respond_to_boards_spinning(
 }
 
 /// One flagged marble: the touches detection recorded (gathered again only if it ran out
-/// of room), then the event loop.
+/// of room), then the event loop; the contacts it records are stored back in `stored`.
 fn respond_one(
     boards: &[BoardSnapshot],
     near: &NearPieces,
     params: &SubstepParams,
     marble: &MarbleIn,
-    contacts: &mut Contacts,
+    stored: (&mut Contacts, &mut MoreContacts),
     touches: &mut TouchList,
 ) -> MarbleOut {
+    let mut list = ContactList::load(stored.0, stored.1);
+    let contacts = &mut list;
     let found = match contacts.pending {
         Pending::Touching { complete } => {
             if contacts.len() < crate::components::MAX_CONTACTS {
@@ -182,7 +187,9 @@ fn respond_one(
         Pending::Impact(tau) => Found::Impact(tau),
         Pending::Overlap | Pending::None => Found::Overlap,
     };
-    resolve(boards, Some(near), params, marble, found, touches, contacts)
+    let out = resolve(boards, Some(near), params, marble, found, touches, contacts);
+    list.store(stored.0, stored.1);
+    out
 }
 
 /// Turns every spinning marble's [`Rotation`] by its angular velocity over the substep

@@ -8,7 +8,7 @@ use parry3d::bounding_volume::Aabb;
 
 use super::Stepped;
 use crate::components::{
-    Board, CarriedBy, Collider, ContactKind, Contacts, Marble, Position, Quarantined, Radius,
+    Board, BoardContacts, CarriedBy, Collider, ContactKind, Marble, Position, Quarantined, Radius,
     Rotation, Sensor,
 };
 use crate::config::{StepConfig, Substep};
@@ -70,7 +70,7 @@ pub fn record_touches(
     mut state: ResMut<EventState>,
     mut impacts: ResMut<Messages<MarbleImpact>>,
     pairs: Res<MarbleContacts>,
-    marbles: Query<(Entity, &Contacts), Stepped>,
+    marbles: Query<(Entity, BoardContacts), Stepped>,
     positions: Query<(&Position, &Radius), With<Marble>>,
 ) {
     let state = state.as_mut();

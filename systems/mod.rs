@@ -26,8 +26,9 @@ use bevy_ecs::query::QueryData;
 
 use crate::board_contact::{Material, NearPieces};
 use crate::components::{
-    Acceleration, AngularVelocity, Contacts, Friction, Marble, Position, PositionCarry,
-    Quarantined, Radius, Restitution, RollingResistance, SpinDamping, StepStart, Velocity,
+    Acceleration, AngularVelocity, Contacts, Friction, Marble, MoreContacts, Position,
+    PositionCarry, Quarantined, Radius, Restitution, RollingResistance, SpinDamping, StepStart,
+    Velocity,
 };
 use crate::sleep::Sleeping;
 
@@ -50,6 +51,7 @@ pub struct BoardStaged {
     radius: &'static Radius,
     restitution: &'static Restitution,
     contacts: &'static mut Contacts,
+    more: &'static mut MoreContacts,
     near: &'static mut NearPieces,
 }
 

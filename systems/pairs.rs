@@ -10,8 +10,8 @@ use glam::Vec3;
 use super::Stepped;
 use crate::board_contact::{BoardCache, NearPieces, touch_tolerance};
 use crate::components::{
-    Acceleration, AngularVelocity, Contacts, Friction, Mass, Position, PositionCarry, Radius,
-    Restitution, StepStart, Velocity, compensated_add,
+    Acceleration, AngularVelocity, Contacts, Friction, Mass, MoreContacts, Position, PositionCarry,
+    Radius, Restitution, StepStart, Velocity, compensated_add, contact_iter,
 };
 use crate::config::{StepConfig, Substep};
 use crate::pairs::{BoardTouch, Body, MarbleContacts, PairParams, PairSolver};
@@ -43,14 +43,14 @@ fn board_touches(
     solver: &mut PairSolver,
     cache: &BoardCache,
     body: u32,
-    contacts: &Contacts,
+    (contacts, more): (&Contacts, &MoreContacts),
     restitution: f32,
     h: f32,
     at: f32,
     start: Option<(Vec3, f32, f32, Vec3, Vec3)>,
 ) {
     solver.next_body_touches();
-    for c in contacts.iter() {
+    for c in contact_iter(contacts, more) {
         let Some(board) = cache.boards.get(c.piece.board()) else {
             continue;
         };
@@ -95,13 +95,13 @@ fn speculative_touches(
     body: u32,
     (x, v, a, d): (Vec3, Vec3, Vec3, Vec3),
     r: f32,
-    contacts: &Contacts,
+    (contacts, more): (&Contacts, &MoreContacts),
     near: &NearPieces,
     restitution: f32,
     h: f32,
 ) {
     let reach = d.length() + a.length() * h * h;
-    let touched = |piece| contacts.iter().any(|c| c.piece == piece);
+    let touched = |piece| contact_iter(contacts, more).any(|c| c.piece == piece);
     near.within(
         cache,
         x,
@@ -134,9 +134,15 @@ fn speculative_touches(
 /// The displacement over the substep of a marble's free path along the boards it rests or
 /// slides on, as the marble–board response will move it (what the broad phase bounds).
 #[inline]
-fn free_path(config: &StepConfig, h: f32, v: Vec3, a: Vec3, contacts: &Contacts) -> Vec3 {
+fn free_path(
+    config: &StepConfig,
+    h: f32,
+    v: Vec3,
+    a: Vec3,
+    (contacts, more): (&Contacts, &MoreContacts),
+) -> Vec3 {
     let (mut v, mut a) = (v, a);
-    for c in contacts.iter() {
+    for c in contact_iter(contacts, more) {
         v -= v.dot(c.normal).min(0.0) * c.normal;
         a -= a.dot(c.normal).min(0.0) * c.normal;
     }
@@ -172,6 +178,7 @@ pub struct PairContactStaged {
     mass: &'static Mass,
     restitution: &'static Restitution,
     contacts: &'static Contacts,
+    more: &'static MoreContacts,
     near: &'static NearPieces,
     spin: Option<&'static mut AngularVelocity>,
     friction: Option<&'static Friction>,
@@ -190,6 +197,7 @@ pub struct PairImpactStaged {
     mass: &'static Mass,
     restitution: &'static Restitution,
     contacts: &'static Contacts,
+    more: &'static MoreContacts,
     acceleration: &'static Acceleration,
 }
 
@@ -222,9 +230,10 @@ pub fn pair_contacts(
             .zip(t.velocity)
             .zip(t.acceleration)
             .zip(t.radius)
-            .zip(t.contacts);
-        for (((((&entity, x), v), a), r), contacts) in rows {
-            let d = free_path(&config, h, v.0, a.0, contacts);
+            .zip(t.contacts)
+            .zip(t.more);
+        for ((((((&entity, x), v), a), r), contacts), more) in rows {
+            let d = free_path(&config, h, v.0, a.0, (contacts, more));
             let sphere = PairSolver::contact_sphere(&params, x.0, d, r.0);
             solver.push_sphere(entity, sphere, r.0);
             solver.push_free_path(d);
@@ -286,7 +295,8 @@ pub fn pair_contacts(
         let (x, r) = (b.x, m.radius.0);
         let tol = touch_tolerance(config.contact_tolerance, r, x);
         let start = Some((x, r, tol, b.d, b.a));
-        board_touches(solver, &cache, body as u32, m.contacts, e, h, 0.0, start);
+        let contacts = (m.contacts, m.more);
+        board_touches(solver, &cache, body as u32, contacts, e, h, 0.0, start);
         let b = solver.body(body);
         let state = (b.x, b.v, b.a, b.d);
         speculative_touches(
@@ -295,7 +305,7 @@ pub fn pair_contacts(
             body as u32,
             state,
             m.radius.0,
-            m.contacts,
+            contacts,
             m.near,
             e,
             h,
@@ -403,16 +413,16 @@ pub fn pair_impacts(
             .iter()
             .zip(t.acceleration)
             .zip(t.contacts)
+            .zip(t.more)
             .zip(t.restitution);
-        for (((start, a), contacts), e) in rows {
-            let after = contacts
-                .iter()
+        for ((((start, a), contacts), more), e) in rows {
+            let after = contact_iter(contacts, more)
                 .map(|c| c.time)
                 .filter(|&t| t > 0.0)
                 .fold(f32::INFINITY, f32::min);
             let (dx, dv) = config.integrator.delta(start.velocity, a.0, h);
             solver.push_free_end(after, start.position + dx, start.velocity + dv);
-            board_touches(solver, &cache, body, contacts, e.0, h, h, None);
+            board_touches(solver, &cache, body, (contacts, more), e.0, h, h, None);
             body += 1;
         }
     }

@@ -7,7 +7,8 @@ use parry3d::bounding_volume::Aabb;
 
 use crate::board_contact::{BoardCache, BoardSnapshot};
 use crate::components::{
-    AngularVelocity, Contacts, Force, Marble, Mass, Position, Quarantined, Radius, Velocity,
+    AngularVelocity, BoardContacts, Contacts, Force, Marble, Mass, Position, Quarantined, Radius,
+    Velocity,
 };
 use crate::config::{GravityTilt, Sleep, StepConfig, Substep};
 use crate::pairs::PairSolver;
@@ -310,7 +311,7 @@ pub fn fall_asleep(
         (
             Entity,
             (&Position, &mut Velocity, &Force, &Mass, &Radius),
-            &Contacts,
+            BoardContacts,
             Option<&mut AngularVelocity>,
             Option<&mut Drowsy>,
         ),

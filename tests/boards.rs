@@ -50,8 +50,7 @@ fn shoot(
         sim.step();
         if first.is_none()
             && let Some(c) = sim
-                .world()
-                .get::<Contacts>(marble)
+                .contacts(marble)
                 .unwrap()
                 .iter()
                 .find(|c| c.kind == ContactKind::Collision)
@@ -294,7 +293,7 @@ fn rising_board_carries_a_resting_marble() {
             let what = format!("{integrator:?} step {step}");
             assert!((x.y - (0.1 + R + t)).abs() <= 1e-5, "{what}: y = {}", x.y);
             assert!((v - Vec3::Y).length() <= 1e-5, "{what}: v = {v}");
-            assert!(!sim.world().get::<Contacts>(marble).unwrap().has_collision());
+            assert!(!sim.contacts(marble).unwrap().has_collision());
         }
     }
 }
@@ -325,7 +324,7 @@ fn tilting_board_keeps_a_resting_marble_in_contact() {
             sim.step();
             let (x, _, _) = turning_board_exact(false, Vec3::X, omega, q0, step as f32 * dt);
             worst = worst.max((sim.marble_state(0).0 - x).length());
-            let contacts = sim.world().get::<Contacts>(marble).unwrap();
+            let contacts = sim.contacts(marble).unwrap();
             assert!(
                 !contacts.is_empty() && !contacts.has_collision(),
                 "{integrator:?} step {step}: {contacts:?}"
@@ -366,7 +365,7 @@ fn riding_a_turning_board_never_hops() {
             let mut worst = 0.0f32;
             for step in 1..=180 {
                 sim.step();
-                let contacts = sim.world().get::<Contacts>(marble).unwrap();
+                let contacts = sim.contacts(marble).unwrap();
                 assert!(
                     !contacts.is_empty() && !contacts.has_collision(),
                     "{what} step {step}: {contacts:?}"

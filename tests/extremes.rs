@@ -258,8 +258,7 @@ fn boards_rotating_at_ten_radians_per_second() {
         sim.step();
         traj.push(sim.marble_state(0));
         if let Some(c) = sim
-            .world()
-            .get::<Contacts>(m)
+            .contacts(m)
             .unwrap()
             .iter()
             .find(|c| c.kind == ContactKind::Collision)

@@ -156,7 +156,7 @@ fn resting_marble_does_not_jitter() {
                 for step in 0..600 {
                     sim.step();
                     let (x, v) = sim.marble_state(0);
-                    let contacts = sim.world().get::<Contacts>(marble).unwrap();
+                    let contacts = sim.contacts(marble).unwrap();
                     let what = format!("{floor:?} {integrator:?} ccd={ccd} step {step}");
                     assert!(
                         (x - Vec3::new(0.0, top + R, 0.0)).length() <= 1e-6,

@@ -323,7 +323,7 @@ fn turning_board_errors(integrator: Integrator, rolling: bool, dt: f32) -> (f32,
             let got = sim.marble_spin(0).z;
             spin = spin.max((got - w).abs() / (w - omega).abs().max(1.0));
         }
-        let contacts = sim.world().get::<Contacts>(m).unwrap();
+        let contacts = sim.contacts(m).unwrap();
         assert!(
             !contacts.is_empty() && !contacts.has_collision(),
             "{integrator:?} rolling={rolling} dt={dt} step {i}: {contacts:?}"

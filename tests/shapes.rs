@@ -129,7 +129,7 @@ fn no_ghost_bumps_on_internal_edges() {
             (v - Vec3::new(1.6, 0.0, 1.2)).length() <= 1e-5,
             "step {step}: v = {v}"
         );
-        assert!(!sim.world().get::<Contacts>(marble).unwrap().has_collision());
+        assert!(!sim.contacts(marble).unwrap().has_collision());
     }
 }
 
@@ -203,6 +203,6 @@ fn resting_in_a_corner_touches_three_boards() {
         (x - Vec3::new(0.1 - R, R, 0.1 - R)).length() <= 1e-5 && v.length() <= 1e-5,
         "x = {x}, v = {v}"
     );
-    let contacts = sim.world().get::<Contacts>(sim.marbles()[0]).unwrap();
+    let contacts = sim.contacts(sim.marbles()[0]).unwrap();
     assert_eq!(contacts.len(), 3, "{contacts:?}");
 }

@@ -245,7 +245,7 @@ fn event_loop(
     p: &crate::response::SubstepParams,
     m: &crate::response::MarbleIn,
     tol: f32,
-) -> (crate::response::MarbleOut, crate::components::Contacts) {
+) -> (crate::response::MarbleOut, crate::components::ContactList) {
     let mut touches = TouchList::default();
     gather(
         &cache.boards,
@@ -258,7 +258,7 @@ fn event_loop(
         -m.v0,
         &mut touches,
     );
-    let mut full = crate::components::Contacts::default();
+    let mut full = crate::components::ContactList::default();
     let out = crate::response::resolve(
         &cache.boards,
         None,
@@ -292,7 +292,7 @@ fn case_params(k: usize, h: f32) -> crate::response::SubstepParams {
 
 /// A marble's records, bit for bit.
 fn records(
-    c: &crate::components::Contacts,
+    c: &crate::components::ContactList,
 ) -> Vec<(PieceId, crate::components::ContactKind, u32, [u32; 3])> {
     c.iter()
         .map(|c| {
@@ -313,7 +313,7 @@ fn records(
 /// [`crate::response::resolve_resting_still`]), wherever it answers, is the same.
 #[test]
 fn resting_closed_form_is_the_event_loop() {
-    use crate::components::Contacts;
+    use crate::components::ContactList;
     use crate::response::{MarbleIn, resolve_resting, resolve_resting_still};
     let cache = boards(Vec3::ZERO);
     let b = &cache.boards[1];
@@ -351,7 +351,7 @@ fn resting_closed_form_is_the_event_loop() {
             continue;
         };
         let bits = |v: Vec3| v.to_array().map(f32::to_bits);
-        let mut fast = Contacts::default();
+        let mut fast = ContactList::default();
         let closed = resolve_resting(&cache.boards, &p, &m, &tc, &mut fast);
         // The still-face path, where it answers, is the same touch and the same result.
         if let Some(still) = list.still_face(
@@ -375,7 +375,7 @@ fn resting_closed_form_is_the_event_loop() {
                 )
             };
             assert_eq!(touch(&still), touch(&tc), "case {k}");
-            let mut quick = Contacts::default();
+            let mut quick = ContactList::default();
             let same = resolve_resting_still(&cache.boards, &p, &m, &still, &mut quick);
             assert_eq!(
                 same.map(|o| (bits(o.d), bits(o.v))),
@@ -411,7 +411,7 @@ fn resting_closed_form_is_the_event_loop() {
 /// declines when a friction event falls inside the substep.
 #[test]
 fn rolling_closed_form_is_the_event_loop() {
-    use crate::components::Contacts;
+    use crate::components::ContactList;
     use crate::response::{MarbleIn, resolve_rolling};
     let cache = boards(Vec3::ZERO);
     let b = &cache.boards[1];
@@ -450,7 +450,7 @@ fn rolling_closed_form_is_the_event_loop() {
         else {
             continue;
         };
-        let mut fast = Contacts::default();
+        let mut fast = ContactList::default();
         let Some(closed) = resolve_rolling(&cache.boards, &p, &m, &tc, &mut fast) else {
             declined += 1;
             continue;

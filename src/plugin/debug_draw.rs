@@ -24,7 +24,7 @@ use bevy_time::Time;
 use bevy_transform::components::GlobalTransform;
 use glam::{Quat, Vec3};
 
-use crate::components::{Board, Collider, ContactKind, Contacts, Position, Rotation, Sensor};
+use crate::components::{Board, BoardContacts, Collider, ContactKind, Position, Rotation, Sensor};
 use crate::events::MarbleImpact;
 
 /// Draws the physics with gizmos; see the [module](self).
@@ -153,7 +153,7 @@ fn draw_shapes(
     }
 }
 
-fn draw_contacts(draw: Res<MarbleDebugDraw>, mut gizmos: Gizmos, marbles: Query<&Contacts>) {
+fn draw_contacts(draw: Res<MarbleDebugDraw>, mut gizmos: Gizmos, marbles: Query<BoardContacts>) {
     if !draw.contacts {
         return;
     }

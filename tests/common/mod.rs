@@ -166,7 +166,7 @@ pub fn first_collision(
     let marble = sim.marbles()[0];
     (0..steps).find_map(|step| {
         sim.step();
-        let contacts = sim.world().get::<Contacts>(marble).unwrap();
+        let contacts = sim.contacts(marble).unwrap();
         contacts
             .iter()
             .find(|c| c.kind == ContactKind::Collision)
