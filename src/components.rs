@@ -596,8 +596,21 @@ pub(crate) fn contact_iter<'a>(
     head: &'a Contacts,
     more: &'a MoreContacts,
 ) -> impl Iterator<Item = &'a Contact> + 'a {
-    let rest = (head.len as usize).saturating_sub(1);
-    head.first().into_iter().chain(more.0[..rest].iter())
+    let (first, rest) = contact_slices(head, more);
+    first.iter().chain(rest)
+}
+
+/// The contacts `head` and `more` record as two slices, the first contact (none or one)
+/// and the rest: for loops that visit them once each, without an iterator chain's branch
+/// per item.
+#[inline(always)]
+pub(crate) fn contact_slices<'a>(
+    head: &'a Contacts,
+    more: &'a MoreContacts,
+) -> (&'a [Contact], &'a [Contact]) {
+    let len = head.len as usize;
+    let first = std::slice::from_ref(&head.first);
+    (&first[..len.min(1)], &more.0[..len.saturating_sub(1)])
 }
 
 /// A marble's board contacts as one value (fixed capacity, no allocation): what the

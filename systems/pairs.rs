@@ -11,7 +11,7 @@ use super::Stepped;
 use crate::board_contact::{BoardCache, NearPieces, touch_tolerance};
 use crate::components::{
     Acceleration, AngularVelocity, Contacts, Friction, Mass, MoreContacts, Position, PositionCarry,
-    Radius, Restitution, StepStart, Velocity, compensated_add, contact_iter,
+    Radius, Restitution, StepStart, Velocity, compensated_add, contact_iter, contact_slices,
 };
 use crate::config::{StepConfig, Substep};
 use crate::pairs::{BoardTouch, Body, MarbleContacts, PairParams, PairSolver};
@@ -142,9 +142,14 @@ fn free_path(
     (contacts, more): (&Contacts, &MoreContacts),
 ) -> Vec3 {
     let (mut v, mut a) = (v, a);
-    for c in contact_iter(contacts, more) {
-        v -= v.dot(c.normal).min(0.0) * c.normal;
-        a -= a.dot(c.normal).min(0.0) * c.normal;
+    let (first, rest) = contact_slices(contacts, more);
+    // The two slices one after the other, in the order recorded (the same operations as
+    // over one list).
+    for list in [first, rest] {
+        for c in list {
+            v -= v.dot(c.normal).min(0.0) * c.normal;
+            a -= a.dot(c.normal).min(0.0) * c.normal;
+        }
     }
     config.integrator.delta(v, a, h).0
 }
