@@ -614,7 +614,7 @@ pub(crate) fn contact_slices<'a>(
 }
 
 /// A marble's board contacts as one value (fixed capacity, no allocation): what the
-/// marble–board stages build a substep's contacts in, and what [`BoardContacts::list`]
+/// marble–board stages build a substep's contacts in, and what [`BoardContactsItem::list`]
 /// and [`Simulation::contacts`](crate::Simulation::contacts) return.
 #[derive(Clone, Copy, Debug)]
 pub struct ContactList {
