@@ -95,7 +95,7 @@ pub fn respond_to_boards(
             .zip(t.radius)
             .zip(t.restitution)
             .zip(t.contacts.iter_mut())
-            .zip(t.more.iter_mut())
+            .zip(t.more.bypass_change_detection())
             .zip(t.near.iter());
         for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
             if !contacts.nothing_pending() {
