@@ -75,8 +75,9 @@ pub fn detect_board_contacts(
         marbles.par_iter_mut().for_each(|m| {
             super::SCRATCH.with_borrow_mut(|touches| {
                 let material = smooth_material(m.restitution);
-                let mut list = ContactList::default();
-                stage.detect_staged(touches, &mut list, m, None, material);
+                super::CONTACT_LIST.with_borrow_mut(|list| {
+                    stage.detect_staged(touches, list, m, None, material);
+                })
             })
         });
         return;
@@ -134,8 +135,9 @@ pub fn detect_board_contacts_spinning(
     let each = |touches: &mut TouchList,
                 (m, s): (BoardStagedItem<'_, '_>, SpinStagedItem<'_, '_>)| {
         let material = s.material(m.restitution);
-        let mut list = ContactList::default();
-        stage.detect_staged(touches, &mut list, m, Some(s.spin), material);
+        super::CONTACT_LIST.with_borrow_mut(|list| {
+            stage.detect_staged(touches, list, m, Some(s.spin), material);
+        });
     };
     super::for_each_marble!(marbles, each);
 }

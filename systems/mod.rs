@@ -96,6 +96,14 @@ pub(crate) fn smooth_material(restitution: &Restitution) -> Material {
 #[cfg(feature = "parallel")]
 pub(crate) const PARALLEL_MIN: usize = 1024;
 
+thread_local! {
+    /// Each thread's scratch [`ContactList`](crate::components::ContactList), in which the
+    /// marble–board detection of a marble that spins, or of any marble on the task pool,
+    /// builds its contacts before storing them (rather than a fresh list per marble).
+    pub(crate) static CONTACT_LIST: std::cell::RefCell<crate::components::ContactList> =
+        std::cell::RefCell::new(crate::components::ContactList::default());
+}
+
 #[cfg(feature = "parallel")]
 thread_local! {
     /// Each task-pool thread's scratch [`TouchList`](crate::board_contact::TouchList) for
