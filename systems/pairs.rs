@@ -228,21 +228,16 @@ pub fn pair_contacts(
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
     for t in tables {
-        let rows = t
-            .entity
+        let paths = t
+            .velocity
             .iter()
-            .zip(t.position)
-            .zip(t.velocity)
             .zip(t.acceleration)
-            .zip(t.radius)
             .zip(t.contacts)
-            .zip(t.more);
-        for ((((((&entity, x), v), a), r), contacts), more) in rows {
-            let d = free_path(&config, h, v.0, a.0, (contacts, more));
-            let sphere = PairSolver::contact_sphere(&params, x.0, d, r.0);
-            solver.push_sphere(entity, sphere, r.0);
-            solver.push_free_path(d);
-        }
+            .zip(t.more)
+            .map(|(((v, a), contacts), more)| free_path(&config, h, v.0, a.0, (contacts, more)));
+        let centres = t.position.iter().map(|x| x.0);
+        let radii = t.radius.iter().map(|r| r.0);
+        solver.push_contact_spheres(&params, t.entity, centres, radii, paths);
     }
     if !solver.cover_gathered() {
         solver.forget_contacts();
@@ -359,11 +354,13 @@ pub fn pair_impacts(
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
     for t in tables {
-        let rows = t.entity.iter().zip(t.start).zip(t.position).zip(t.radius);
-        for (((&entity, start), x), r) in rows {
-            let sphere = PairSolver::impact_sphere(&params, start.position, x.0, r.0);
-            solver.push_sphere(entity, sphere, r.0);
-        }
+        let paths = t
+            .start
+            .iter()
+            .zip(t.position)
+            .map(|(s, x)| (s.position, x.0));
+        let radii = t.radius.iter().map(|r| r.0);
+        solver.push_impact_spheres(&params, t.entity, paths, radii);
     }
     if !solver.cover_gathered() {
         return;

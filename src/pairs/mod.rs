@@ -265,7 +265,7 @@ pub struct PairParams {
 ///
 /// | phase | contact stage (`PairContacts`) | impact stage (`PairImpacts`) |
 /// | --- | --- | --- |
-/// | 1. broad phase | [`begin`](Self::begin); per marble [`push_sphere`](Self::push_sphere) of its [`contact_sphere`](Self::contact_sphere) and [`push_free_path`](Self::push_free_path); [`cover_gathered`](Self::cover_gathered) (false: [`forget_contacts`](Self::forget_contacts), stop) | [`begin`](Self::begin); per marble [`push_sphere`](Self::push_sphere) of its [`impact_sphere`](Self::impact_sphere); [`cover_gathered`](Self::cover_gathered) (false: stop) |
+/// | 1. broad phase | [`begin`](Self::begin); per table of marbles [`push_contact_spheres`](Self::push_contact_spheres); [`cover_gathered`](Self::cover_gathered) (false: [`forget_contacts`](Self::forget_contacts), stop) | [`begin`](Self::begin); per table [`push_impact_spheres`](Self::push_impact_spheres); [`cover_gathered`](Self::cover_gathered) (false: stop) |
 /// | 2. bodies | [`clear_bodies`](Self::clear_bodies), per marble [`push_body_on_free_path`](Self::push_body_on_free_path) (at the substep's start), [`find_touching`](Self::find_touching) (false: stop) | [`clear_bodies`](Self::clear_bodies), per marble [`push_body`](Self::push_body) (start and end of the substep), [`find_impacts`](Self::find_impacts) (false: stop) |
 /// | 3. board contacts | [`begin_board_touches`](Self::begin_board_touches); per marble [`next_body_touches`](Self::next_body_touches) then, if [`in_rows`](Self::in_rows), its [`push_board_touch`](Self::push_board_touch)es; [`end_board_touches`](Self::end_board_touches) | the same, every marble |
 /// | 4. solve | [`solve_touching`](Self::solve_touching) | [`resolve_impacts`](Self::resolve_impacts) |
@@ -367,8 +367,9 @@ pub struct PairSolver {
 
 impl PairSolver {
     /// Each stage starts with the broad phase on one sphere per marble, gathered before
-    /// the bodies are: [`PairSolver::begin`], then [`PairSolver::push_sphere`] for every
-    /// marble in the order its body will have, then [`PairSolver::cover_gathered`]. A
+    /// the bodies are: [`PairSolver::begin`], then [`PairSolver::push_contact_spheres`] or
+    /// [`PairSolver::push_impact_spheres`] for every table of marbles, in the order their
+    /// bodies will have, then [`PairSolver::cover_gathered`]. A
     /// substep in which no two marbles can meet (marbles spread over a board) ends there,
     /// without building the bodies. `n` is the number of marbles; `out` (the stage's
     /// records) is only sized.
@@ -386,19 +387,49 @@ impl PairSolver {
         self.paths.clear();
     }
 
-    /// A marble's broad-phase sphere (centre, radius), its radius and entity.
+    /// Phase 1 of the contact stage, one table of marbles at a time (in the order their
+    /// bodies will have): the table's entities, centres and radii, and each marble's free
+    /// displacement over the substep (its integrator's displacement along the boards it
+    /// rests on), kept for its body; its sphere is the [`contact_sphere`](Self::contact_sphere).
+    /// Written with `extend` over the columns: a marble costs no capacity check or length
+    /// update per buffer.
     #[inline]
-    pub fn push_sphere(&mut self, entity: Entity, sphere: Vec4, r: f32) {
-        self.spheres.push(sphere);
-        self.radii.push(r);
-        self.gathered.push(entity);
+    pub fn push_contact_spheres(
+        &mut self,
+        p: &PairParams,
+        entities: &[Entity],
+        centres: impl Iterator<Item = Vec3>,
+        radii: impl Iterator<Item = f32> + Clone,
+        paths: impl Iterator<Item = Vec3>,
+    ) {
+        let from = self.paths.len();
+        self.paths.extend(paths);
+        let spheres = centres
+            .zip(&self.paths[from..])
+            .zip(radii.clone())
+            .map(|((x, &d), r)| Self::contact_sphere(p, x, d, r));
+        self.spheres.extend(spheres);
+        self.radii.extend(radii);
+        self.gathered.extend_from_slice(entities);
     }
 
-    /// The contact stage's free displacement of the marble whose sphere was pushed last
-    /// (its integrator's displacement along the boards it rests on), kept for its body.
+    /// Phase 1 of the impact stage, one table of marbles at a time (in the order their
+    /// bodies will have): the table's entities, centres at the substep's start and end,
+    /// and radii; each marble's sphere is the [`impact_sphere`](Self::impact_sphere).
     #[inline]
-    pub fn push_free_path(&mut self, d: Vec3) {
-        self.paths.push(d);
+    pub fn push_impact_spheres(
+        &mut self,
+        p: &PairParams,
+        entities: &[Entity],
+        paths: impl Iterator<Item = (Vec3, Vec3)>,
+        radii: impl Iterator<Item = f32> + Clone,
+    ) {
+        let spheres = paths
+            .zip(radii.clone())
+            .map(|((x0, x), r)| Self::impact_sphere(p, x0, x, r));
+        self.spheres.extend(spheres);
+        self.radii.extend(radii);
+        self.gathered.extend_from_slice(entities);
     }
 
     /// Phase 2: forgets the last substep's bodies.
@@ -430,7 +461,7 @@ impl PairSolver {
     }
 
     /// Phase 2 of the contact stage: the next marble, its [`Body::d`] the free path pushed
-    /// with its sphere ([`PairSolver::push_free_path`]).
+    /// with its sphere ([`PairSolver::push_contact_spheres`]).
     #[inline]
     pub fn push_body_on_free_path(&mut self, mut body: Body) {
         body.d = self.paths[self.bodies.len()];
