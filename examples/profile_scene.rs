@@ -1,6 +1,7 @@
 //! Steps a bench scene for profiling: `cargo run --release --example profile_scene --
-//! SCENE N STEPS [collisions|off|rolling|noboards|events|sensors]`, e.g. `walled_board 10000
-//! 60 collisions` (`rolling`: spin and friction on, marble collisions off; `events`: the
+//! SCENE N STEPS [collisions|off|rolling|noboards|events|sensors|each]`, e.g. `walled_board 10000
+//! 60 collisions` (`each`: the scene's own settings, every step timed and printed on its
+//! own; `rolling`: spin and friction on, marble collisions off; `events`: the
 //! scene's own settings with impacts and contacts recorded as messages; `sensors`: the
 //! scene's own settings and 48 sensors, 10 cm boxes, spread over the marbles). SCENE `labyrinth_steady` is
 //! the labyrinth from where it is after 5 s (building it steps the labyrinth for 5 s);
@@ -24,7 +25,8 @@ fn main() {
     };
     let events = args.get(4).is_some_and(|c| c == "events");
     let sensors = args.get(4).is_some_and(|c| c == "sensors");
-    if let Some(c) = args.get(4).filter(|_| !events && !sensors) {
+    let each = args.get(4).is_some_and(|c| c == "each");
+    if let Some(c) = args.get(4).filter(|_| !events && !sensors && !each) {
         scene.marble_collisions = c == "collisions";
         scene.rolling |= c == "rolling";
         if c == "noboards" {
@@ -61,8 +63,13 @@ fn main() {
         assert_eq!(sim.asleep(), n, "the pile is asleep after 6 s");
     }
     let start = std::time::Instant::now();
-    for _ in 0..steps {
+    for s in 0..steps {
+        let at = std::time::Instant::now();
         sim.step();
+        if each {
+            let ns = at.elapsed().as_nanos() as f64 / n as f64;
+            println!("step {}: {ns:.0} ns per marble", s + 1);
+        }
     }
     let ns = start.elapsed().as_nanos() as f64 / (steps * n) as f64;
     println!("{label} x {n}, {steps} steps: {ns:.0} ns per marble-step");
