@@ -354,13 +354,13 @@ pub fn pair_impacts(
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
     for t in tables {
-        let paths = t
+        let ends = t
             .start
             .iter()
             .zip(t.position)
             .map(|(s, x)| (s.position, x.0));
         let radii = t.radius.iter().map(|r| r.0);
-        solver.push_impact_spheres(&params, t.entity, paths, radii);
+        solver.push_impact_spheres(&params, t.entity, ends, radii);
     }
     if !solver.cover_gathered() {
         return;

@@ -409,8 +409,7 @@ impl PairSolver {
             .zip(radii.clone())
             .map(|((x, &d), r)| Self::contact_sphere(p, x, d, r));
         self.spheres.extend(spheres);
-        self.radii.extend(radii);
-        self.gathered.extend_from_slice(entities);
+        self.push_table(entities, radii);
     }
 
     /// Phase 1 of the impact stage, one table of marbles at a time (in the order their
@@ -421,13 +420,19 @@ impl PairSolver {
         &mut self,
         p: &PairParams,
         entities: &[Entity],
-        paths: impl Iterator<Item = (Vec3, Vec3)>,
+        ends: impl Iterator<Item = (Vec3, Vec3)>,
         radii: impl Iterator<Item = f32> + Clone,
     ) {
-        let spheres = paths
+        let spheres = ends
             .zip(radii.clone())
             .map(|((x0, x), r)| Self::impact_sphere(p, x0, x, r));
         self.spheres.extend(spheres);
+        self.push_table(entities, radii);
+    }
+
+    /// With a table's spheres: its marbles' radii and entities.
+    #[inline]
+    fn push_table(&mut self, entities: &[Entity], radii: impl Iterator<Item = f32>) {
         self.radii.extend(radii);
         self.gathered.extend_from_slice(entities);
     }
