@@ -521,13 +521,7 @@ impl Contacts {
     /// What detection left for the response stage.
     #[inline(always)]
     pub(crate) fn pending(&self) -> Pending {
-        match self.pending_kind {
-            PENDING_NONE => Pending::None,
-            PENDING_TOUCHING => Pending::Touching { complete: false },
-            PENDING_TOUCHING_COMPLETE => Pending::Touching { complete: true },
-            PENDING_IMPACT => Pending::Impact(self.pending_time),
-            _ => Pending::Overlap,
-        }
+        Pending::unpack(self.pending_kind, self.pending_time)
     }
 
     /// True when detection left nothing for the response stage.
@@ -649,6 +643,32 @@ const PENDING_TOUCHING_COMPLETE: u8 = 2;
 const PENDING_IMPACT: u8 = 3;
 const PENDING_OVERLAP: u8 = 4;
 
+impl Pending {
+    /// As [`Contacts`] holds it: a kind (one of the `PENDING_` values) and an impact's time.
+    #[inline(always)]
+    fn pack(self) -> (u8, f32) {
+        match self {
+            Pending::None => (PENDING_NONE, 0.0),
+            Pending::Touching { complete: false } => (PENDING_TOUCHING, 0.0),
+            Pending::Touching { complete: true } => (PENDING_TOUCHING_COMPLETE, 0.0),
+            Pending::Impact(tau) => (PENDING_IMPACT, tau),
+            Pending::Overlap => (PENDING_OVERLAP, 0.0),
+        }
+    }
+
+    /// The inverse of [`Pending::pack`].
+    #[inline(always)]
+    fn unpack(kind: u8, time: f32) -> Pending {
+        match kind {
+            PENDING_NONE => Pending::None,
+            PENDING_TOUCHING => Pending::Touching { complete: false },
+            PENDING_TOUCHING_COMPLETE => Pending::Touching { complete: true },
+            PENDING_IMPACT => Pending::Impact(time),
+            _ => Pending::Overlap,
+        }
+    }
+}
+
 /// Marks a marble whose position or velocity stopped being finite. Quarantined marbles are
 /// skipped by every stage; nothing else is affected.
 #[derive(Component, Clone, Copy, Debug, Default)]
@@ -705,13 +725,7 @@ impl ContactList {
     #[inline(always)]
     pub(crate) fn store(&self, head: &mut Contacts, more: &mut MoreContacts) {
         let len = self.len as usize;
-        let (pending_kind, pending_time) = match self.pending {
-            Pending::None => (PENDING_NONE, 0.0),
-            Pending::Touching { complete: false } => (PENDING_TOUCHING, 0.0),
-            Pending::Touching { complete: true } => (PENDING_TOUCHING_COMPLETE, 0.0),
-            Pending::Impact(tau) => (PENDING_IMPACT, tau),
-            Pending::Overlap => (PENDING_OVERLAP, 0.0),
-        };
+        let (pending_kind, pending_time) = self.pending.pack();
         // The whole component in one write (the first contact's place is filled whatever
         // the count: the list keeps what it held there).
         *head = Contacts {
