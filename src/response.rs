@@ -75,7 +75,11 @@
 //! ([`resolve_resting`]; [`resolve_rolling`] for a marble that spins, when no friction
 //! event falls inside the substep): the response, the constrained (and frictional)
 //! accelerations and the exact path to the substep's end, with no search (see
-//! [`crate::board_contact`], "Near pieces"). Unit tests check that both give the loop's bits.
+//! [`crate::board_contact`], "Near pieces"). A marble that does not spin, riding the one
+//! convex piece of a scene's only board while that board moves or turns, has it too
+//! ([`resolve_riding`]): the loop's own operations on that touch, its search for an impact
+//! and its end-of-substep gather answered from the marble's near-piece list where the list
+//! covers them. Unit tests check that all three give the loop's bits.
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever finishes the substep as without continuous collision: its
@@ -93,7 +97,7 @@ use glam::Vec3;
 
 use crate::board_contact::{
     BoardSnapshot, MAX_TOUCHES, Material, NearPieces, Path, Touch, TouchList, earliest_impact,
-    gather,
+    gather, gather_board, lone_path_is_clear,
 };
 use crate::components::{Contact, ContactKind, ContactList};
 use crate::config::Integrator;
@@ -156,6 +160,10 @@ pub enum Found {
     /// No touch at the start; overlap at the end of the free path (`ccd` off).
     Overlap,
 }
+
+/// How many touching tolerances out the end of a substep looks for a marble held on a
+/// turning board all through it (see `resolve_with`, "End of substep").
+const DRIFT: f32 = 4.0;
 
 /// Most friction events (a slip or a spin that stops) per marble per substep; past it the
 /// substep ends without friction (module docs).
@@ -426,7 +434,6 @@ fn resolve_with<const SPINS: bool>(
     // for such a marble, and where the pull into the surface would bring it back before it
     // rose past that (`u² ≤ 2 |a_n| tol`), it is not leaving: it is put back on the
     // surface, its drift removed.
-    const DRIFT: f32 = 4.0;
     let held_turning = settled_start && t >= p.h && turns(touches.as_slice());
     let end_tol = if held_turning { DRIFT * tol } else { tol };
     gather(
@@ -449,6 +456,50 @@ fn resolve_with<const SPINS: bool>(
     {
         came_through(boards, near, p, m, tol, s.d, touches);
     }
+    let settled = settled_start && t >= p.h;
+    let friction = friction_events < MAX_FRICTION_EVENTS;
+    finish::<SPINS>(
+        boards,
+        p,
+        m,
+        (tol, end_tol),
+        settled,
+        held_turning,
+        motion,
+        friction,
+        s,
+        touches,
+        contacts,
+    )
+}
+
+/// Step 5 of the module docs after the end-of-substep gather: `touches` holds what the
+/// marble touches (or overlaps) where its path `s` ended, found within `end_tol` (`tol`:
+/// the touching tolerance; `end_tol` is wider for a marble `held_turning`, held on a
+/// turning board all through the substep). Resolves what still overlaps or approaches,
+/// then goes back from the path's velocity to the integrator's. `settled`: the marble
+/// spent the whole substep on the touches it started with (no event), under `motion`;
+/// `friction`: below [`MAX_FRICTION_EVENTS`].
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the event loop's state, handed over"
+)]
+#[inline(always)]
+fn finish<const SPINS: bool>(
+    boards: &[BoardSnapshot],
+    p: &SubstepParams,
+    m: &MarbleIn,
+    (tol, end_tol): (f32, f32),
+    settled: bool,
+    held_turning: bool,
+    motion: Motion,
+    friction: bool,
+    mut s: State,
+    touches: &mut TouchList,
+    contacts: &mut ContactList,
+) -> MarbleOut {
+    let hold = Hold::new(p.threshold, p.h);
+    let sep = hold.speed;
     // Touches found only by the wider look that are not the held drift are no touches.
     let mut beyond = [false; MAX_TOUCHES];
     for (i, tc) in touches.as_slice().iter().enumerate() {
@@ -496,8 +547,7 @@ fn resolve_with<const SPINS: bool>(
     }
     // Back from the path velocity to the integrator's, with the acceleration the marble
     // is left with.
-    let friction = friction_events < MAX_FRICTION_EVENTS;
-    let end_hold = if settled_start && t >= p.h && motion.rolls {
+    let end_hold = if settled && motion.rolls {
         hold.within(0.0).rolled()
     } else {
         hold.within(0.0)
@@ -511,8 +561,7 @@ fn resolve_with<const SPINS: bool>(
         0.0,
         friction,
     );
-    if settled_start
-        && t >= p.h
+    if settled
         && matches!(p.integrator, Integrator::VelocityVerlet | Integrator::Rk4)
         && !touches.as_slice().is_empty()
         && touches
@@ -558,11 +607,7 @@ fn resolve_with<const SPINS: bool>(
     // instead, the force a marble in a bowl feels would be held from the start and reported
     // from the end, and its swing would grow as `exp(ω² h t / 4)`. When the touches change
     // (a marble that lands, or leaves), the end's is the one it goes on with.
-    let end = if settled_start
-        && t >= p.h
-        && motion.held
-        && end.held
-        && p.integrator == Integrator::SemiImplicitEuler
+    let end = if settled && motion.held && end.held && p.integrator == Integrator::SemiImplicitEuler
     {
         Motion {
             a: motion.a,
@@ -878,6 +923,94 @@ pub fn resolve_rolling(
         v: s.v - offset(motion.a),
         w: s.w - offset(motion.alpha),
     })
+}
+
+/// [`resolve`] in closed form for a marble riding a moving board: a marble that does not
+/// spin, whose only touch at the substep's start is `tc` (on a convex piece of the
+/// scene's only board, which moves or turns), with `near` holding that piece alone. The
+/// event loop's operations in that case, with its two searches answered by the list:
+/// continuous collision has nothing to search while the list covers the path (the piece
+/// is touched, and no other is listed), and the end of the substep finds at most that
+/// piece, computed directly, while the list covers the end. `None` (and `contacts` and
+/// `touches` to be rewritten) when the list does not cover the path or its end, or the
+/// marble ends past the piece's middle: the event loop handles those.
+pub fn resolve_riding(
+    boards: &[BoardSnapshot],
+    near: &NearPieces,
+    p: &SubstepParams,
+    m: &MarbleIn,
+    tc: &Touch,
+    touches: &mut TouchList,
+    contacts: &mut ContactList,
+) -> Option<MarbleOut> {
+    let [board] = boards else {
+        return None;
+    };
+    debug_assert!(m.w0.is_none() && tc.convex && board.is_moving());
+    let tol = crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0);
+    let hold = Hold::new(p.threshold, p.h);
+    let one = std::slice::from_ref(tc);
+    let mut s = State {
+        d: Vec3::ZERO,
+        v: m.v0,
+        w: Vec3::ZERO,
+        r: m.r,
+    };
+    contacts.clear();
+    // The event loop's start on its one touch (`Found::Touching`).
+    let lead = p.integrator.velocity_lead(p.h);
+    respond::<false>(one, &mut s, p.threshold, boards, 0.0, lead, m.a, contacts);
+    let motion = settle::<false>(one, &mut s, m.a, hold, true, lead);
+    s.v += p.integrator.velocity_offset(motion.a, p.h);
+    // Its search for an impact, which finds none where the list covers the path.
+    if p.ccd && p.max_impacts > 0 {
+        let path = Path {
+            t0: 0.0,
+            x: m.x0 + s.d,
+            v: s.v,
+            a: motion.a,
+        };
+        if !lone_path_is_clear(board, near, tc.piece, &path, p.h, m.r, tol) {
+            return None;
+        }
+    }
+    advance::<false>(&mut s, &motion, p.h);
+    // Its end: the piece again, where the board has carried it (the loop's end gather,
+    // on the list).
+    let held_turning = turns(one);
+    let end_tol = if held_turning { DRIFT * tol } else { tol };
+    touches.clear();
+    if !gather_board::<false>(
+        0,
+        board,
+        Some(near),
+        p.h,
+        m.x0 + s.d,
+        m.r,
+        end_tol,
+        &m.material,
+        -s.v,
+        touches,
+    ) || touches
+        .as_slice()
+        .iter()
+        .any(|tc| past_middle(tc, m.r, s.d))
+    {
+        return None;
+    }
+    Some(finish::<false>(
+        boards,
+        p,
+        m,
+        (tol, end_tol),
+        true,
+        held_turning,
+        motion,
+        true,
+        s,
+        touches,
+        contacts,
+    ))
 }
 
 /// From the integrator's reported velocity and spin to the path's, for a marble that

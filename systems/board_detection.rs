@@ -19,7 +19,7 @@ use crate::components::{
 use crate::config::{StepConfig, Substep};
 use crate::response::{
     Found, MarbleIn, SubstepParams, resolve, resolve_resting, resolve_resting_still,
-    resolve_rolling,
+    resolve_riding, resolve_rolling,
 };
 
 /// Whether detection flagged any marble for the response stage this substep, one flag for
@@ -60,7 +60,8 @@ const NEAR_SKIN: f32 = 4.0;
 /// first impact along its free path (`ccd`) or its overlap at the end of the path (no
 /// `ccd`). Marbles with anything to resolve are flagged for the response stage, except
 /// those resting or sliding on one piece with nothing else near ([`resolve_resting`]),
-/// resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
+/// and those riding the one piece of a moving board that their list covers
+/// ([`resolve_riding`]), resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
 /// the substep.
 pub fn detect_board_contacts(
     config: Res<StepConfig>,
@@ -335,9 +336,14 @@ impl<'a> Stage<'a> {
                 material,
             };
             let moving = boards[tc.piece.board()].is_moving();
-            // On a still board, the closed form where it applies.
+            // The closed form where it applies: on a still board, and for a marble that
+            // does not spin riding a moving one.
             let closed = if moving {
-                None
+                if w0.is_none() {
+                    resolve_riding(boards, near, params, &marble, &tc, touches, contacts)
+                } else {
+                    None
+                }
             } else if w0.is_some() {
                 resolve_rolling(boards, params, &marble, &tc, contacts)
             } else {
@@ -345,9 +351,8 @@ impl<'a> Stage<'a> {
             };
             let out = match closed {
                 Some(out) => Some(out),
-                // On a moving board the list vouches only for the touch at the start, and
-                // a spinning marble's friction events need the loop: the event loop on
-                // that one touch.
+                // Where the list does not cover a moving board's path, and for a spinning
+                // marble's friction events: the event loop on that one touch.
                 None if moving || w0.is_some() => {
                     touches.clear();
                     touches.insert(tc, tol);

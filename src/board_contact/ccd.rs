@@ -50,20 +50,13 @@ pub fn earliest_impact(
     tol: f32,
     touching: &TouchList,
 ) -> Option<(f32, PieceId)> {
-    let end = path.position(span);
-    // Bounds of the path: the chord plus the parabola's bulge (⅛ |a| span², rounded up).
-    let bulge = 0.25 * path.a.length() * span * span;
-    let reach = r + tol + bulge;
-    let world = Aabb::new(
-        path.x.min(end) - Vec3::splat(reach),
-        path.x.max(end) + Vec3::splat(reach),
-    );
-    // Where the centre itself can be (no radius): for the flat-face bound below.
-    let centres = Aabb::new(
-        path.x.min(end) - Vec3::splat(bulge),
-        path.x.max(end) + Vec3::splat(bulge),
-    );
-    let marble_speed = path.v.length() + path.a.length() * span;
+    let PathBounds {
+        end,
+        bulge,
+        world,
+        centres,
+        marble_speed,
+    } = PathBounds::new(path, span, r, tol);
     let hint = -path.v;
     let mut best: Option<(f32, PieceId)> = None;
 
@@ -73,52 +66,28 @@ pub fn earliest_impact(
         {
             continue;
         }
-        let (c0, q0) = b.pose_at(path.t0);
-        let moving = b.is_moving();
-        // The rate of the centre's distance to a flat face with normal n0 (world, at the
-        // path's start) is n(τ)·ẏ(τ) with |n(τ) − n0| ≤ |ω| τ: bounded by the normal
-        // component of the relative motion plus the turning terms (module docs).
-        let wv = b.angular_velocity;
-        let w = wv.length();
-        let rel = path.v - b.velocity;
-        let u0 = rel - wv.cross(path.x - c0);
-        let bb = path.a - wv.cross(rel);
-        let curl = 0.5 * span * span * w * path.a.length();
+        let sweep = Sweep::new(b, path, span, marble_speed);
+        let Sweep {
+            c0,
+            q0,
+            moving,
+            w,
+            u0,
+            bb,
+            curl,
+            speed,
+        } = sweep;
         let face_speed = |n0: Vec3| {
             n0.dot(u0).abs()
                 + span * n0.dot(bb).abs()
                 + curl
                 + w * span * (u0.length() + span * bb.length() + curl)
         };
-        // Speed bound of the marble relative to the board's frame (a still board: the
-        // marble's own speed bound). For a moving board: the distance to a piece changes
-        // no faster than the marble's position in the board's frame, y = Rᵀ(x − c), whose
-        // rate is the marble's velocity relative to the board's material point under it:
-        //   ẏ = Rᵀ(u0 + τ (a − ω × (v − v_b)) − ½ τ² ω × a),
-        //   u0 = v − v_b − ω × (x − c) at the path's start.
-        // A marble riding a turning board has u0 ≈ 0, so the bound stays tight where
-        // the board's own speed would make conservative advancement crawl.
-        let speed = if moving {
-            u0.length() + span * bb.length() + curl
-        } else {
-            marble_speed
-        };
         if speed <= 0.0 {
             continue;
         }
-        // Whether the marble's list covers every centre of the path in the board's frame:
-        // on a still board they lie within half the chord and the bulge of the chord's
-        // middle, on a moving one within `speed · span` of the start. A list that covers
-        // them and holds only touched pieces leaves nothing to search.
         let list = NearPieces::of(near, bi);
-        let covered = list.is_some_and(|l| {
-            if moving {
-                l.covers(q0.conjugate() * (path.x - c0), speed * span, tol)
-            } else {
-                let spread = 0.5 * (end - path.x).length() + bulge;
-                l.covers(q0.conjugate() * (0.5 * (path.x + end) - c0), spread, tol)
-            }
-        });
+        let covered = list.is_some_and(|l| sweep.covered(l, path, end, bulge, span, tol));
         if covered && list.is_some_and(|l| l.pieces().iter().all(|&p| touching.contains(p))) {
             continue;
         }
@@ -213,4 +182,153 @@ pub fn earliest_impact(
         }
     }
     best
+}
+
+/// The bounds of a path over `span` for a marble of radius `r` (touching tolerance `tol`).
+struct PathBounds {
+    /// Centre at the span's end.
+    end: Vec3,
+    /// The parabola's bulge beyond its chord (⅛ |a| span², rounded up).
+    bulge: f32,
+    /// Everything the marble can reach, world.
+    world: Aabb,
+    /// Where the centre itself can be (no radius), world: for the flat-face bound.
+    centres: Aabb,
+    /// Bound of the marble's speed over the span.
+    marble_speed: f32,
+}
+
+impl PathBounds {
+    #[inline(always)]
+    fn new(path: &Path, span: f32, r: f32, tol: f32) -> Self {
+        let end = path.position(span);
+        let bulge = 0.25 * path.a.length() * span * span;
+        let reach = r + tol + bulge;
+        PathBounds {
+            end,
+            bulge,
+            world: Aabb::new(
+                path.x.min(end) - Vec3::splat(reach),
+                path.x.max(end) + Vec3::splat(reach),
+            ),
+            centres: Aabb::new(
+                path.x.min(end) - Vec3::splat(bulge),
+                path.x.max(end) + Vec3::splat(bulge),
+            ),
+            marble_speed: path.v.length() + path.a.length() * span,
+        }
+    }
+}
+
+/// A path's motion relative to one board over `span`.
+#[derive(Clone, Copy)]
+struct Sweep {
+    /// The board's pose at the path's start.
+    c0: Vec3,
+    q0: Quat,
+    moving: bool,
+    /// The board's turning rate, rad/s.
+    w: f32,
+    /// The marble's velocity relative to the board's material point under it, at the
+    /// path's start.
+    u0: Vec3,
+    /// The rate of that relative velocity, less the turning of the frame.
+    bb: Vec3,
+    /// The bound of the frame's turning of the acceleration over the span.
+    curl: f32,
+    /// Speed bound of the marble relative to the board's frame (a still board: the
+    /// marble's own speed bound).
+    speed: f32,
+}
+
+impl Sweep {
+    #[inline(always)]
+    fn new(b: &BoardSnapshot, path: &Path, span: f32, marble_speed: f32) -> Self {
+        let (c0, q0) = b.pose_at(path.t0);
+        let moving = b.is_moving();
+        // The rate of the centre's distance to a flat face with normal n0 (world, at the
+        // path's start) is n(τ)·ẏ(τ) with |n(τ) − n0| ≤ |ω| τ: bounded by the normal
+        // component of the relative motion plus the turning terms (module docs).
+        let wv = b.angular_velocity;
+        let w = wv.length();
+        let rel = path.v - b.velocity;
+        let u0 = rel - wv.cross(path.x - c0);
+        let bb = path.a - wv.cross(rel);
+        let curl = 0.5 * span * span * w * path.a.length();
+        // For a moving board: the distance to a piece changes no faster than the
+        // marble's position in the board's frame, y = Rᵀ(x − c), whose rate is the
+        // marble's velocity relative to the board's material point under it:
+        //   ẏ = Rᵀ(u0 + τ (a − ω × (v − v_b)) − ½ τ² ω × a),
+        //   u0 = v − v_b − ω × (x − c) at the path's start.
+        // A marble riding a turning board has u0 ≈ 0, so the bound stays tight where
+        // the board's own speed would make conservative advancement crawl.
+        let speed = if moving {
+            u0.length() + span * bb.length() + curl
+        } else {
+            marble_speed
+        };
+        Sweep {
+            c0,
+            q0,
+            moving,
+            w,
+            u0,
+            bb,
+            curl,
+            speed,
+        }
+    }
+
+    /// Whether the marble's list covers every centre of the path in the board's frame:
+    /// on a still board they lie within half the chord and the bulge of the chord's
+    /// middle, on a moving one within `speed · span` of the start.
+    #[inline(always)]
+    fn covered(
+        &self,
+        list: &NearPieces,
+        path: &Path,
+        end: Vec3,
+        bulge: f32,
+        span: f32,
+        tol: f32,
+    ) -> bool {
+        if self.moving {
+            list.covers(
+                self.q0.conjugate() * (path.x - self.c0),
+                self.speed * span,
+                tol,
+            )
+        } else {
+            let spread = 0.5 * (end - path.x).length() + bulge;
+            list.covers(
+                self.q0.conjugate() * (0.5 * (path.x + end) - self.c0),
+                spread,
+                tol,
+            )
+        }
+    }
+}
+
+/// Whether [`earliest_impact`] of `path` over `span` has nothing to search, for a marble
+/// touching `piece` of `board`, the only board, whose list holds that piece alone: the
+/// path stays away from the board, or within what the list covers. The marble then meets
+/// no piece in the span (the search would visit the list and skip the touched piece).
+pub(crate) fn lone_path_is_clear(
+    board: &BoardSnapshot,
+    list: &NearPieces,
+    piece: PieceId,
+    path: &Path,
+    span: f32,
+    r: f32,
+    tol: f32,
+) -> bool {
+    debug_assert_eq!(list.pieces(), &[piece]);
+    let bounds = PathBounds::new(path, span, r, tol);
+    if let Some(a) = &board.swept_aabb
+        && !overlaps(a, &bounds.world)
+    {
+        return true;
+    }
+    let sweep = Sweep::new(board, path, span, bounds.marble_speed);
+    sweep.speed <= 0.0 || sweep.covered(list, path, bounds.end, bounds.bulge, span, tol)
 }

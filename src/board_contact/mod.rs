@@ -43,7 +43,8 @@
 //! ([`NearPieces::lone_touch`]; in closed form over a flat face), and a marble resting or
 //! sliding there is resolved in closed form ([`crate::response::resolve_resting`]; a
 //! spinning one by the event loop on that one touch): no search at all in the commonest
-//! case.
+//! case. On a moving board the list answers the searches of a marble riding one piece
+//! ([`crate::response::resolve_riding`]) while it covers the marble's path.
 
 use std::sync::Arc;
 
@@ -58,9 +59,11 @@ mod near;
 mod snapshot;
 mod touch;
 
+pub(crate) use ccd::lone_path_is_clear;
 pub use ccd::{Path, earliest_impact};
 pub use near::{NEAR_MAX, NearPieces};
 pub use snapshot::{BoardCache, BoardSnapshot};
+pub(crate) use touch::gather_board;
 pub use touch::{MAX_TOUCHES, Material, Touch, TouchList, gather, touch_tolerance};
 use touch::{overlaps, sphere_aabb};
 

@@ -74,7 +74,11 @@ const R: f32 = 0.008;
 
 /// A marble centre on the box's floor or against a wall or in a corner, world frame.
 fn near_the_box(cache: &BoardCache, rng: &mut Lcg) -> Vec3 {
-    let b = &cache.boards[1];
+    on_the_box(&cache.boards[1], rng)
+}
+
+/// [`near_the_box`] on the box `b`.
+fn on_the_box(b: &BoardSnapshot, rng: &mut Lcg) -> Vec3 {
     let mut y = rng.vec(Vec3::new(0.62, 0.0, 0.62));
     y.y = R + 1e-6 * rng.next();
     y.x = y.x.clamp(-0.28 + R, 0.28 - R);
@@ -501,4 +505,81 @@ fn near_lists_find_the_searched_impacts() {
         }
         assert!(impacts > 300, "{impacts} impacts");
     }
+}
+
+/// The closed form for a marble riding a moving board on one piece
+/// ([`crate::response::resolve_riding`]) gives the event loop's result, bit for bit
+/// (position, velocity and records), whenever it applies: on the floor of a turning box
+/// (the scene's only board), resting on it, sliding over it or arriving at it, for every
+/// integrator; and it declines where the list does not cover the substep.
+#[test]
+fn riding_closed_form_is_the_event_loop() {
+    use crate::components::ContactList;
+    use crate::response::{MarbleIn, resolve_riding};
+    let mut rng = Lcg(13);
+    let (mut applied, mut declined) = (0, 0);
+    for spin in [
+        Vec3::new(0.0, 0.0, 0.4),
+        Vec3::new(0.02, 0.0, 0.0),
+        Vec3::new(1.5, 0.3, -0.8),
+    ] {
+        let mut cache = boards(spin);
+        cache.boards.remove(0);
+        cache.boards[0] = cache.boards[0].clone().with_poses(H);
+        cache.update_epoch();
+        let b = &cache.boards[0];
+        for k in 0..3000 {
+            let p = case_params(k, H);
+            let x0 = on_the_box(b, &mut rng);
+            let tol = touch_tolerance(p.tolerance, R, x0);
+            // Riding with the board, sliding over it, or arriving at it.
+            let speed = [0.0, 0.02, 0.5][k % 3];
+            let m = MarbleIn {
+                x0,
+                v0: b.point_velocity(0.0, x0) + rng.vec(Vec3::splat(speed)),
+                w0: None,
+                a: b.rotation * Vec3::new(0.0, -9.81, 0.0) + rng.vec(Vec3::splat(2.0)),
+                r: R,
+                material: Material {
+                    restitution: 0.7,
+                    ..Material::default()
+                },
+            };
+            let mut list = NearPieces::default();
+            list.rebuild(&cache, x0, R, tol, 4.0 * R);
+            let Some(tc) = list.lone_touch(
+                &cache.boards,
+                x0,
+                m.v0,
+                m.a,
+                p.h,
+                R,
+                tol,
+                &m.material,
+                false,
+            ) else {
+                continue;
+            };
+            let (mut touches, mut fast) = (TouchList::default(), ContactList::default());
+            let Some(closed) =
+                resolve_riding(&cache.boards, &list, &p, &m, &tc, &mut touches, &mut fast)
+            else {
+                declined += 1;
+                continue;
+            };
+            let (looped, full) = event_loop(&cache, &p, &m, tol);
+            let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+            assert_eq!(
+                (bits(closed.d), bits(closed.v)),
+                (bits(looped.d), bits(looped.v)),
+                "spin {spin}, case {k}"
+            );
+            assert_eq!(records(&fast), records(&full), "spin {spin}, case {k}");
+            applied += 1;
+        }
+    }
+    assert!(
+        applied > 1500 && declined > 20,
+        "applied {applied} times, declined {declined}"
+    );
 }

@@ -262,43 +262,68 @@ pub fn gather(
     out: &mut TouchList,
 ) {
     out.clear();
+    for (bi, b) in boards.iter().enumerate() {
+        gather_board::<true>(bi, b, near, t, x, r, tol, material, hint, out);
+    }
+}
+
+/// [`gather`] on board `bi` alone, adding to `out`. Without `SEARCH`, a board that the
+/// list does not cover where it could reach the marble is not searched: `false`, and
+/// `out` as it was (the caller then gathers in full).
+#[expect(
+    clippy::too_many_arguments,
+    reason = "a hot kernel taking plain values"
+)]
+#[inline(always)]
+pub(crate) fn gather_board<const SEARCH: bool>(
+    bi: usize,
+    b: &BoardSnapshot,
+    near: Option<&NearPieces>,
+    t: f32,
+    x: Vec3,
+    r: f32,
+    tol: f32,
+    material: &Material,
+    hint: Vec3,
+    out: &mut TouchList,
+) -> bool {
     let reach = r + tol;
     let world = sphere_aabb(x, reach);
-    for (bi, b) in boards.iter().enumerate() {
-        if let Some(a) = &b.swept_aabb
-            && !overlaps(a, &world)
-        {
-            continue;
-        }
-        let (c, q) = b.pose_at(t);
-        let inv = q.conjugate();
-        let local = inv * (x - c);
-        let local_hint = inv * hint;
-        let visit = |part: usize, sub: u32, piece: &Piece| {
-            let p = b.geometry.proximity(part, piece, local, local_hint);
-            let gap = p.distance - r;
-            if gap <= tol {
-                let point = q * p.point + c;
-                out.insert(
-                    Touch {
-                        piece: PieceId::new(bi, part, sub),
-                        point,
-                        normal: q * p.normal,
-                        gap,
-                        board_velocity: b.point_velocity(t, point),
-                        board_accel: b.point_accel(t, point),
-                        board_spin: b.angular_velocity,
-                        material: material.combine(b),
-                        convex: piece.is_convex(),
-                    },
-                    tol,
-                );
-            }
-        };
-        match NearPieces::of(near, bi) {
-            Some(list) if list.covers(local, 0.0, tol) => list.visit(&b.geometry, visit),
-            // A sphere's bounds are the same in any frame.
-            _ => b.geometry.for_each_piece(&sphere_aabb(local, reach), visit),
-        }
+    if let Some(a) = &b.swept_aabb
+        && !overlaps(a, &world)
+    {
+        return true;
     }
+    let (c, q) = b.pose_at(t);
+    let inv = q.conjugate();
+    let local = inv * (x - c);
+    let local_hint = inv * hint;
+    let visit = |part: usize, sub: u32, piece: &Piece| {
+        let p = b.geometry.proximity(part, piece, local, local_hint);
+        let gap = p.distance - r;
+        if gap <= tol {
+            let point = q * p.point + c;
+            out.insert(
+                Touch {
+                    piece: PieceId::new(bi, part, sub),
+                    point,
+                    normal: q * p.normal,
+                    gap,
+                    board_velocity: b.point_velocity(t, point),
+                    board_accel: b.point_accel(t, point),
+                    board_spin: b.angular_velocity,
+                    material: material.combine(b),
+                    convex: piece.is_convex(),
+                },
+                tol,
+            );
+        }
+    };
+    match NearPieces::of(near, bi) {
+        Some(list) if list.covers(local, 0.0, tol) => list.visit(&b.geometry, visit),
+        // A sphere's bounds are the same in any frame.
+        _ if SEARCH => b.geometry.for_each_piece(&sphere_aabb(local, reach), visit),
+        _ => return false,
+    }
+    true
 }
