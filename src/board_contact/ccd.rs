@@ -91,6 +91,20 @@ pub fn earliest_impact(
         if covered && list.is_some_and(|l| l.pieces().iter().all(|&p| touching.contains(p))) {
             continue;
         }
+        // Every piece farther at the start than the marble can close on it in the span
+        // (with `tol` to spare): the first step of the advancement below passes the span's
+        // end for each of them (`speed` bounds every piece's own, and the factor covers
+        // the step's rounding), so none is met. (A marble touching a piece is not clear
+        // of the board: not asked.)
+        if covered
+            && touching.is_empty()
+            && list.is_some_and(|l| {
+                l.clearance(q0.conjugate() * (path.x - c0), 0.0)
+                    > speed * span * (1.0 + 16.0 * f32::EPSILON) + tol
+            })
+        {
+            continue;
+        }
         // Everything the marble can reach this substep, in the board's frame; a moving
         // board sees it through both end poses and, if it turns, a margin for the turn.
         let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());

@@ -49,6 +49,9 @@ pub struct NearPieces {
     face_gap: f32,
     /// Each listed piece's gap from the anchor (distance minus radius) when built.
     gaps: [f32; NEAR_MAX],
+    /// The anchor's gap to the nearest piece of the board (the listed gaps, and the reach
+    /// for the rest), less a margin for rounding: [`NearPieces::clearance`] at the anchor.
+    clear: f32,
 }
 
 impl Default for NearPieces {
@@ -66,6 +69,7 @@ impl Default for NearPieces {
             face_normal: Vec3::ZERO,
             face_gap: 0.0,
             gaps: [f32::INFINITY; NEAR_MAX],
+            clear: f32::NEG_INFINITY,
         }
     }
 }
@@ -97,6 +101,21 @@ impl NearPieces {
     #[inline]
     pub fn covers(&self, centre: Vec3, spread: f32, gap: f32) -> bool {
         (centre - self.anchor).length() + spread + gap < self.reach
+    }
+
+    /// A lower bound on the gap (distance minus the radius) between every piece of the
+    /// list's board and a marble centred anywhere within `spread` of `centre` (board
+    /// frame): the listed pieces' gaps from the anchor, and the reach for those left out,
+    /// less how far such a centre can be from the anchor (a distance changes no faster than
+    /// the point it is measured from), less a margin for the rounding of the distances
+    /// compared with it. A query that finds only what lies within `tol` has nothing to
+    /// visit where this exceeds `tol`.
+    #[inline(always)]
+    pub fn clearance(&self, centre: Vec3, spread: f32) -> f32 {
+        // (`clear` allows for the rounding of distances measured from the anchor; one
+        // from `centre` adds at most that of the distance between the two.)
+        let away = (centre - self.anchor).length() + spread;
+        self.clear - away * (1.0 + 8.0 * f32::EPSILON)
     }
 
     /// True when the list was built for these boards and this radius and covers the
@@ -158,7 +177,10 @@ impl NearPieces {
             let (c, q) = b.pose_at(0.0);
             let inv = q.conjugate();
             let local = inv * (x - c);
-            if !self.covers(local, 0.0, tol) {
+            // Covered, and not clear of the piece by more than `tol` (`covers` and
+            // `clearance` on one distance): else no touch, without computing it.
+            let away = (local - self.anchor).length();
+            if away + tol >= self.reach || self.clear - away * (1.0 + 8.0 * f32::EPSILON) > tol {
                 return None;
             }
             let piece = b.geometry.piece(id.part(), id.sub());
@@ -415,6 +437,16 @@ impl NearPieces {
     /// the nearest, when the next is beyond half the reach).
     /// Leaves no list when there is no board.
     pub fn rebuild(&mut self, cache: &BoardCache, x: Vec3, r: f32, tol: f32, skin: f32) {
+        self.build(cache, x, r, tol, skin);
+        let nearest = self.gaps[..self.len as usize]
+            .iter()
+            .fold(self.reach, |g, &p| g.min(p));
+        self.clear = nearest
+            - 8.0 * f32::EPSILON * (r + nearest.abs() + 2.0 * self.anchor.abs().max_element());
+    }
+
+    /// [`NearPieces::rebuild`] less its clearance.
+    fn build(&mut self, cache: &BoardCache, x: Vec3, r: f32, tol: f32, skin: f32) {
         *self = NearPieces {
             epoch: cache.epoch,
             radius: r,

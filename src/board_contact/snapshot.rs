@@ -84,7 +84,7 @@ impl BoardSnapshot {
     /// Acceleration of the board's material point at world point `p`, time `t`: the
     /// centripetal `ω × (ω × (p − c))` of its turning (boards move at constant velocity and
     /// turn at constant rate over a step).
-    #[inline]
+    #[inline(always)]
     pub fn point_accel(&self, t: f32, p: Vec3) -> Vec3 {
         if self.angular_velocity == Vec3::ZERO {
             return Vec3::ZERO;
@@ -94,7 +94,7 @@ impl BoardSnapshot {
     }
 
     /// Velocity of the board's material point at world point `p`, time `t`.
-    #[inline]
+    #[inline(always)]
     pub fn point_velocity(&self, t: f32, p: Vec3) -> Vec3 {
         self.velocity
             + self

@@ -476,22 +476,30 @@ fn rolling_closed_form_is_the_event_loop() {
 }
 
 /// The earliest impact along a path the list covers is the search's, on a still and on
-/// a turning board.
+/// a turning board: for marbles near the floor, walls and corners, and for marbles
+/// falling from up to 10 radii above them (where the list's clearance passes over its
+/// pieces).
 #[test]
 fn near_lists_find_the_searched_impacts() {
     for spin in [Vec3::ZERO, Vec3::new(0.0, 0.0, 0.4)] {
         let cache = boards(spin);
         let mut rng = Lcg(11);
         let mut impacts = 0;
-        for _ in 0..2000 {
-            let anchor = near_the_box(&cache, &mut rng);
+        for i in 0..4000 {
+            let lift = if i < 2000 {
+                0.0
+            } else {
+                R * (6.0 + 8.0 * rng.next())
+            };
+            let up = cache.boards[1].rotation * Vec3::Y;
+            let anchor = near_the_box(&cache, &mut rng) + lift * up;
             let tol = touch_tolerance(1e-4, R, anchor);
             let mut list = NearPieces::default();
             list.rebuild(&cache, anchor, R, tol, 4.0 * R);
             let path = Path {
                 t0: 0.0,
                 x: anchor + rng.vec(Vec3::splat(R)) + Vec3::new(0.0, 0.5 * R, 0.0),
-                v: rng.vec(Vec3::splat(6.0)),
+                v: rng.vec(Vec3::splat(if i < 2000 { 6.0 } else { 1.0 })),
                 a: Vec3::new(0.0, -9.81, 0.0),
             };
             let touching = TouchList::default();
@@ -581,5 +589,60 @@ fn riding_closed_form_is_the_event_loop() {
     assert!(
         applied > 1500 && declined > 20,
         "applied {applied} times, declined {declined}"
+    );
+}
+
+/// [`NearPieces::clearance`], by which gathers and the impact search pass over a list's
+/// pieces, is a lower bound on the gap between every piece of the list's board and any
+/// centre within the spread asked of it, and at the anchor it is the nearest piece's gap
+/// (less its rounding margin): centres above the floor of a tilted box, by its walls and
+/// in its corners, up to 10 radii above it, lists built with reaches of 2 to 8 radii,
+/// centres up to 4 radii from the anchor with spreads up to 2 radii.
+#[test]
+fn clearance_bounds_every_gap() {
+    let cache = boards(Vec3::ZERO);
+    let mut rng = Lcg(17);
+    let (mut clear, mut tight) = (0, 0);
+    for _ in 0..2000 {
+        let b = &cache.boards[1];
+        let above = b.rotation * Vec3::new(0.0, 10.0 * R * (rng.next() + 0.5), 0.0);
+        let anchor = near_the_box(&cache, &mut rng) + above;
+        let tol = touch_tolerance(1e-4, R, anchor);
+        let mut list = NearPieces::default();
+        let skin = (5.0 + 6.0 * rng.next()) * R;
+        list.rebuild(&cache, anchor, R, tol, skin);
+        let bi = (0..cache.boards.len())
+            .find(|&bi| NearPieces::of(Some(&list), bi).is_some())
+            .expect("a list of some board");
+        let b = &cache.boards[bi];
+        let local = |x: Vec3| b.rotation.conjugate() * (x - b.position);
+        let nearest = |y: Vec3| {
+            let mut g = f32::INFINITY;
+            let all = Aabb::new(Vec3::splat(-100.0), Vec3::splat(100.0));
+            b.geometry.for_each_piece(&all, |part, _, piece| {
+                g = g.min(b.geometry.proximity(part, piece, y, Vec3::ZERO).distance - R);
+            });
+            g
+        };
+        if !list.pieces().is_empty() {
+            let at = local(anchor);
+            let (c, g) = (list.clearance(at, 0.0), nearest(at));
+            assert!(c <= g && g - c < 1e-6, "at the anchor: {c} against {g}");
+            tight += 1;
+        }
+        let centre = local(anchor) + rng.vec(Vec3::splat(8.0 * R));
+        let spread = 2.0 * R * (rng.next() + 0.5);
+        let c = list.clearance(centre, spread);
+        for k in 0..8 {
+            let out = rng.vec(Vec3::ONE).normalize_or(Vec3::X);
+            let y = centre + out * spread * if k == 0 { 1.0 } else { rng.next() + 0.5 };
+            let g = nearest(y);
+            assert!(c <= g, "clearance {c} above the gap {g} at {y}");
+        }
+        clear += usize::from(c > tol);
+    }
+    assert!(
+        clear > 200 && tight > 1000,
+        "{clear} clear, {tight} at the anchor"
     );
 }

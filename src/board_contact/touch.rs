@@ -320,7 +320,12 @@ pub(crate) fn gather_board<const SEARCH: bool>(
         }
     };
     match NearPieces::of(near, bi) {
-        Some(list) if list.covers(local, 0.0, tol) => list.visit(&b.geometry, visit),
+        // Clear of every piece by more than `tol`, the list finds nothing to visit.
+        Some(list) if list.covers(local, 0.0, tol) => {
+            if list.clearance(local, 0.0) <= tol {
+                list.visit(&b.geometry, visit);
+            }
+        }
         // A sphere's bounds are the same in any frame.
         _ if SEARCH => b.geometry.for_each_piece(&sphere_aabb(local, reach), visit),
         _ => return false,
