@@ -107,13 +107,15 @@ pub fn earliest_impact(
         }
         // Everything the marble can reach this substep, in the board's frame; a moving
         // board sees it through both end poses and, if it turns, a margin for the turn.
-        let mut query = transform_aabb(&world, q0.conjugate() * -c0, q0.conjugate());
-        let mut centre_query = transform_aabb(&centres, q0.conjugate() * -c0, q0.conjugate());
+        let to_start = AabbTransform::new(q0.conjugate() * -c0, q0.conjugate());
+        let mut query = to_start.apply(&world);
+        let mut centre_query = to_start.apply(&centres);
         if moving {
             let (c1, q1) = b.pose_at(path.t0 + span);
-            let q_end = transform_aabb(&world, q1.conjugate() * -c1, q1.conjugate());
+            let to_end = AabbTransform::new(q1.conjugate() * -c1, q1.conjugate());
+            let q_end = to_end.apply(&world);
             query = Aabb::new(query.mins.min(q_end.mins), query.maxs.max(q_end.maxs));
-            let c_end = transform_aabb(&centres, q1.conjugate() * -c1, q1.conjugate());
+            let c_end = to_end.apply(&centres);
             centre_query = Aabb::new(
                 centre_query.mins.min(c_end.mins),
                 centre_query.maxs.max(c_end.maxs),

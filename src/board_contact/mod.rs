@@ -52,7 +52,7 @@ use bevy_ecs::prelude::*;
 use glam::{Quat, Vec3};
 use parry3d::bounding_volume::Aabb;
 
-use crate::geometry::{BoardGeometry, Piece, PieceId, transform_aabb};
+use crate::geometry::{AabbTransform, BoardGeometry, Piece, PieceId};
 
 mod ccd;
 mod near;
