@@ -75,11 +75,12 @@
 //! ([`resolve_resting`]; [`resolve_rolling`] for a marble that spins, when no friction
 //! event falls inside the substep): the response, the constrained (and frictional)
 //! accelerations and the exact path to the substep's end, with no search (see
-//! [`crate::board_contact`], "Near pieces"). A marble that does not spin, riding the one
-//! convex piece of a scene's only board while that board moves or turns, has it too
-//! ([`resolve_riding`]): the loop's own operations on that touch, its search for an impact
-//! and its end-of-substep gather answered from the marble's near-piece list where the list
-//! covers them. Unit tests check that all three give the loop's bits.
+//! [`crate::board_contact`], "Near pieces"). A marble that does not spin, riding convex
+//! pieces of a scene's only board while that board moves or turns (its floor, or its
+//! floor and a wall), every piece its near-piece list holds among them, has it too
+//! ([`resolve_riding`]): the loop's own operations on those touches, its search for an
+//! impact and its end-of-substep gather answered from the list where the list covers
+//! them. Unit tests check that all three give the loop's bits.
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever finishes the substep as without continuous collision: its
@@ -97,7 +98,7 @@ use glam::Vec3;
 
 use crate::board_contact::{
     BoardSnapshot, MAX_TOUCHES, Material, NearPieces, Path, Touch, TouchList, earliest_impact,
-    gather, gather_board, lone_path_is_clear,
+    gather, gather_board, touched_path_is_clear,
 };
 use crate::components::{Contact, ContactKind, ContactList};
 use crate::config::Integrator;
@@ -926,30 +927,31 @@ pub fn resolve_rolling(
 }
 
 /// [`resolve`] in closed form for a marble riding a moving board: a marble that does not
-/// spin, whose only touch at the substep's start is `tc` (on a convex piece of the
-/// scene's only board, which moves or turns), with `near` holding that piece alone. The
-/// event loop's operations in that case, with its two searches answered by the list:
-/// continuous collision has nothing to search while the list covers the path (the piece
-/// is touched, and no other is listed), and the end of the substep finds at most that
-/// piece, computed directly, while the list covers the end. `None` (and `contacts` and
-/// `touches` to be rewritten) when the list does not cover the path or its end, or the
-/// marble ends past the piece's middle: the event loop handles those.
+/// spin, touching at the substep's start the pieces in `touches` (convex pieces of the
+/// scene's only board, which moves or turns: on its floor, or also against a wall), with
+/// `near` holding no other piece. The event loop's operations in that case, with its two
+/// searches answered by the list: continuous collision has nothing to search while the
+/// list covers the path (every piece it holds is touched), and the end of the substep
+/// finds at most the listed pieces, computed directly, while the list covers the end.
+/// `None` (and `contacts` and `touches` to be rewritten) when the list does not cover the
+/// path or its end, or holds a piece not touched, or the marble ends past a piece's
+/// middle: the event loop handles those.
 pub fn resolve_riding(
     boards: &[BoardSnapshot],
     near: &NearPieces,
     p: &SubstepParams,
     m: &MarbleIn,
-    tc: &Touch,
     touches: &mut TouchList,
     contacts: &mut ContactList,
 ) -> Option<MarbleOut> {
     let [board] = boards else {
         return None;
     };
-    debug_assert!(m.w0.is_none() && tc.convex && board.is_moving());
+    let start = touches.as_slice();
+    debug_assert!(m.w0.is_none() && board.is_moving());
+    debug_assert!(!start.is_empty() && start.iter().all(|tc| tc.convex));
     let tol = crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0);
     let hold = Hold::new(p.threshold, p.h);
-    let one = std::slice::from_ref(tc);
     let mut s = State {
         d: Vec3::ZERO,
         v: m.v0,
@@ -957,10 +959,10 @@ pub fn resolve_riding(
         r: m.r,
     };
     contacts.clear();
-    // The event loop's start on its one touch (`Found::Touching`).
+    // The event loop's start on its touches (`Found::Touching`).
     let lead = p.integrator.velocity_lead(p.h);
-    respond::<false>(one, &mut s, p.threshold, boards, 0.0, lead, m.a, contacts);
-    let motion = settle::<false>(one, &mut s, m.a, hold, true, lead);
+    respond::<false>(start, &mut s, p.threshold, boards, 0.0, lead, m.a, contacts);
+    let motion = settle::<false>(start, &mut s, m.a, hold, true, lead);
     s.v += p.integrator.velocity_offset(motion.a, p.h);
     // Its search for an impact, which finds none where the list covers the path.
     if p.ccd && p.max_impacts > 0 {
@@ -970,14 +972,14 @@ pub fn resolve_riding(
             v: s.v,
             a: motion.a,
         };
-        if !lone_path_is_clear(board, near, tc.piece, &path, p.h, m.r, tol) {
+        if !touched_path_is_clear(board, near, touches, &path, p.h, m.r, tol) {
             return None;
         }
     }
     advance::<false>(&mut s, &motion, p.h);
-    // Its end: the piece again, where the board has carried it (the loop's end gather,
+    // Its end: the pieces again, where the board has carried it (the loop's end gather,
     // on the list).
-    let held_turning = turns(one);
+    let held_turning = turns(touches.as_slice());
     let end_tol = if held_turning { DRIFT * tol } else { tol };
     touches.clear();
     if !gather_board::<false>(

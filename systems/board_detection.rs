@@ -60,8 +60,8 @@ const NEAR_SKIN: f32 = 4.0;
 /// first impact along its free path (`ccd`) or its overlap at the end of the path (no
 /// `ccd`). Marbles with anything to resolve are flagged for the response stage, except
 /// those resting or sliding on one piece with nothing else near ([`resolve_resting`]),
-/// and those riding the one piece of a moving board that their list covers
-/// ([`resolve_riding`]), resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
+/// and those riding a moving board on every piece their list holds, which covers their
+/// substep ([`resolve_riding`]), resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
 /// the substep.
 pub fn detect_board_contacts(
     config: Res<StepConfig>,
@@ -340,7 +340,9 @@ impl<'a> Stage<'a> {
             // does not spin riding a moving one.
             let closed = if moving {
                 if w0.is_none() {
-                    resolve_riding(boards, near, params, &marble, &tc, touches, contacts)
+                    touches.clear();
+                    touches.insert(tc, tol);
+                    resolve_riding(boards, near, params, &marble, touches, contacts)
                 } else {
                     None
                 }
@@ -391,6 +393,44 @@ impl<'a> Stage<'a> {
             -start.velocity,
             touches,
         );
+        // A marble that does not spin riding the scene's only board, which moves, on
+        // every piece its list holds (on the floor against a wall): in closed form where
+        // the list covers its substep, else as below, the touches gathered again.
+        if let Some(list) = near
+            && w0.is_none()
+            && !touches.is_empty()
+            && boards.len() == 1
+            && boards[0].is_moving()
+            && touches.as_slice().iter().all(|tc| tc.convex)
+            && list.pieces().iter().all(|&p| touches.contains(p))
+        {
+            let marble = MarbleIn {
+                x0: start.position,
+                v0: start.velocity,
+                w0: None,
+                a: acceleration.0,
+                r,
+                material,
+            };
+            if let Some(out) = resolve_riding(boards, list, params, &marble, touches, contacts) {
+                (position.0, carry.0) =
+                    compensated_add(config.compensated, start.position, start.carry, out.d);
+                velocity.0 = out.v;
+                return;
+            }
+            contacts.clear();
+            gather(
+                boards,
+                near,
+                0.0,
+                start.position,
+                r,
+                tol,
+                &material,
+                -start.velocity,
+                touches,
+            );
+        }
         if !touches.is_empty() {
             for tc in touches.as_slice() {
                 let u = (start.velocity - tc.board_velocity).dot(tc.normal);

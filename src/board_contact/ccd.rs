@@ -326,19 +326,18 @@ impl Sweep {
 }
 
 /// Whether [`earliest_impact`] of `path` over `span` has nothing to search, for a marble
-/// touching `piece` of `board`, the only board, whose list holds that piece alone: the
-/// path stays away from the board, or within what the list covers. The marble then meets
-/// no piece in the span (the search would visit the list and skip the touched piece).
-pub(crate) fn lone_path_is_clear(
+/// touching the pieces in `touching` of `board`, the only board: the path stays away
+/// from the board, or within what the marble's list covers, every piece of which it
+/// touches (the search would visit the list and skip them all).
+pub(crate) fn touched_path_is_clear(
     board: &BoardSnapshot,
     list: &NearPieces,
-    piece: PieceId,
+    touching: &TouchList,
     path: &Path,
     span: f32,
     r: f32,
     tol: f32,
 ) -> bool {
-    debug_assert_eq!(list.pieces(), &[piece]);
     let bounds = PathBounds::new(path, span, r, tol);
     if let Some(a) = &board.swept_aabb
         && !overlaps(a, &bounds.world)
@@ -346,5 +345,7 @@ pub(crate) fn lone_path_is_clear(
         return true;
     }
     let sweep = Sweep::new(board, path, span, bounds.marble_speed);
-    sweep.speed <= 0.0 || sweep.covered(list, path, bounds.end, bounds.bulge, span, tol)
+    sweep.speed <= 0.0
+        || (sweep.covered(list, path, bounds.end, bounds.bulge, span, tol)
+            && list.pieces().iter().all(|&p| touching.contains(p)))
 }

@@ -59,7 +59,7 @@ mod near;
 mod snapshot;
 mod touch;
 
-pub(crate) use ccd::lone_path_is_clear;
+pub(crate) use ccd::touched_path_is_clear;
 pub use ccd::{Path, earliest_impact};
 pub use near::{NEAR_MAX, NearPieces};
 pub use snapshot::{BoardCache, BoardSnapshot};
