@@ -77,10 +77,10 @@
 //! accelerations and the exact path to the substep's end, with no search (see
 //! [`crate::board_contact`], "Near pieces"). A marble that does not spin, riding convex
 //! pieces of a scene's only board while that board moves or turns (its floor, or its
-//! floor and a wall), every piece its near-piece list holds among them, has it too
-//! ([`resolve_riding`]): the loop's own operations on those touches, its search for an
-//! impact and its end-of-substep gather answered from the list where the list covers
-//! them. Unit tests check that all three give the loop's bits.
+//! floor and a wall), has it too ([`resolve_riding`]): the loop's own operations on
+//! those touches, its search for an impact and its end-of-substep gather answered from
+//! the marble's near-piece list where the list covers them. Unit tests check that all
+//! three give the loop's bits.
 //!
 //! The impact count per substep is bounded ([`StepConfig::max_impacts`]); a marble wedged so
 //! that it would collide for ever finishes the substep as without continuous collision: its
@@ -928,14 +928,14 @@ pub fn resolve_rolling(
 
 /// [`resolve`] in closed form for a marble riding a moving board: a marble that does not
 /// spin, touching at the substep's start the pieces in `touches` (convex pieces of the
-/// scene's only board, which moves or turns: on its floor, or also against a wall), with
-/// `near` holding no other piece. The event loop's operations in that case, with its two
-/// searches answered by the list: continuous collision has nothing to search while the
-/// list covers the path (every piece it holds is touched), and the end of the substep
-/// finds at most the listed pieces, computed directly, while the list covers the end.
-/// `None` (and `contacts` and `touches` to be rewritten) when the list does not cover the
-/// path or its end, or holds a piece not touched, or the marble ends past a piece's
-/// middle: the event loop handles those.
+/// scene's only board, which moves or turns: its floor, or also a wall), `near` its
+/// near-piece list. The event loop's operations in that case, with its two searches
+/// answered by the list: continuous collision finds nothing while the list covers the
+/// path and every listed piece it does not touch is out of the path's reach at its start
+/// or within the touching tolerance (the search's own test of each, its first step), and
+/// the end of the substep finds at most the listed pieces, computed directly, while the
+/// list covers the end. `None` (and `contacts` and `touches` to be rewritten) where
+/// those fail, or the marble ends past a piece's middle: the event loop handles those.
 pub fn resolve_riding(
     boards: &[BoardSnapshot],
     near: &NearPieces,

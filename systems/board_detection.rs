@@ -60,8 +60,8 @@ const NEAR_SKIN: f32 = 4.0;
 /// first impact along its free path (`ccd`) or its overlap at the end of the path (no
 /// `ccd`). Marbles with anything to resolve are flagged for the response stage, except
 /// those resting or sliding on one piece with nothing else near ([`resolve_resting`]),
-/// and those riding a moving board on every piece their list holds, which covers their
-/// substep ([`resolve_riding`]), resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
+/// and those riding a moving board whose list answers their substep's searches
+/// ([`resolve_riding`]), resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
 /// the substep.
 pub fn detect_board_contacts(
     config: Res<StepConfig>,
@@ -393,16 +393,15 @@ impl<'a> Stage<'a> {
             -start.velocity,
             touches,
         );
-        // A marble that does not spin riding the scene's only board, which moves, on
-        // every piece its list holds (on the floor against a wall): in closed form where
-        // the list covers its substep, else as below, the touches gathered again.
+        // A marble that does not spin riding the scene's only board, which moves (on its
+        // floor, or against a wall too): in closed form where its list answers the
+        // substep's searches, else as below, the touches gathered again.
         if let Some(list) = near
             && w0.is_none()
             && !touches.is_empty()
             && boards.len() == 1
             && boards[0].is_moving()
             && touches.as_slice().iter().all(|tc| tc.convex)
-            && list.pieces().iter().all(|&p| touches.contains(p))
         {
             let marble = MarbleIn {
                 x0: start.position,

@@ -325,10 +325,14 @@ impl Sweep {
     }
 }
 
-/// Whether [`earliest_impact`] of `path` over `span` has nothing to search, for a marble
-/// touching the pieces in `touching` of `board`, the only board: the path stays away
-/// from the board, or within what the marble's list covers, every piece of which it
-/// touches (the search would visit the list and skip them all).
+/// Whether [`earliest_impact`] of `path` over `span` finds nothing, for a marble touching
+/// the pieces in `touching` of `board`, the only board, with `list` its near-piece list:
+/// the path stays away from the board, or within what the list covers, and each listed
+/// piece the marble does not touch is, at the path's start, within `tol` (the search
+/// takes it for touched) or farther than the marble can close in the span with `tol` to
+/// spare (the search's first step passes the span's end: `speed` bounds every piece's
+/// own, and the factor covers the step's rounding). The gaps are the search's own, bit
+/// for bit.
 pub(crate) fn touched_path_is_clear(
     board: &BoardSnapshot,
     list: &NearPieces,
@@ -345,7 +349,26 @@ pub(crate) fn touched_path_is_clear(
         return true;
     }
     let sweep = Sweep::new(board, path, span, bounds.marble_speed);
-    sweep.speed <= 0.0
-        || (sweep.covered(list, path, bounds.end, bounds.bulge, span, tol)
-            && list.pieces().iter().all(|&p| touching.contains(p)))
+    if sweep.speed <= 0.0 {
+        return true;
+    }
+    if !sweep.covered(list, path, bounds.end, bounds.bulge, span, tol) {
+        return false;
+    }
+    let closing = sweep.speed * span * (1.0 + 16.0 * f32::EPSILON) + tol;
+    // As the search's `gap_at(0)`: the board at the path's start.
+    let inv = sweep.q0.conjugate();
+    let local = inv * (path.position(0.0) - sweep.c0);
+    let hint = inv * -path.v;
+    list.pieces().iter().all(|&id| {
+        touching.contains(id) || {
+            let piece = board.geometry.piece(id.part(), id.sub());
+            let gap = board
+                .geometry
+                .proximity(id.part(), &piece, local, hint)
+                .distance
+                - r;
+            gap <= tol || gap > closing
+        }
+    })
 }
