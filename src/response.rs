@@ -993,6 +993,7 @@ pub fn resolve_riding(
         &m.material,
         -s.v,
         touches,
+        &mut None,
     ) || touches
         .as_slice()
         .iter()

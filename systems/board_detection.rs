@@ -10,7 +10,7 @@ use super::{
 };
 use crate::board_contact::{
     BoardCache, Material, NearPieces, Path, Touch, TouchList, earliest_impact, gather,
-    touch_tolerance,
+    gather_single, path_is_clear, touch_tolerance,
 };
 use crate::components::{
     Acceleration, AngularVelocity, Contact, ContactKind, ContactList, Pending, Position,
@@ -381,18 +381,36 @@ impl<'a> Stage<'a> {
             }
             contacts.clear();
         }
-        let near = Some(&*near);
-        gather(
-            boards,
-            near,
-            0.0,
-            start.position,
-            r,
-            tol,
-            &material,
-            -start.velocity,
-            touches,
-        );
+        let near_list = &*near;
+        let near = Some(near_list);
+        // With one board, the clearance the list shows when it shows the marble clear of
+        // the board.
+        let clear = match boards {
+            [board] => gather_single(
+                board,
+                near_list,
+                start.position,
+                r,
+                tol,
+                &material,
+                -start.velocity,
+                touches,
+            ),
+            _ => {
+                gather(
+                    boards,
+                    near,
+                    0.0,
+                    start.position,
+                    r,
+                    tol,
+                    &material,
+                    -start.velocity,
+                    touches,
+                );
+                None
+            }
+        };
         // A marble that does not spin riding the scene's only board, which moves (on its
         // floor, or against a wall too): in closed form where its list answers the
         // substep's searches, else as below, the touches gathered again.
@@ -461,6 +479,14 @@ impl<'a> Stage<'a> {
                 v: start.velocity + config.integrator.velocity_offset(acceleration.0, h),
                 a: acceleration.0,
             };
+            // A marble in the air over the scene's only board, clear of it for the whole
+            // substep by its list's word: the search would skip the board on this same
+            // test.
+            if let (Some(clear), [board]) = (clear, boards)
+                && path_is_clear(board, near_list, &path, h, r, tol, clear)
+            {
+                return;
+            }
             if let Some((tau, _)) = earliest_impact(boards, near, &path, h, r, tol, touches) {
                 self.flag(contacts, Pending::Impact(tau));
             }

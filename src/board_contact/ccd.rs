@@ -325,6 +325,28 @@ impl Sweep {
     }
 }
 
+/// Whether a marble at the start of `path` (at time 0 of the substep), shown `clear` of
+/// `board`, the scene's only board, by its list `near` (the clearance
+/// [`gather_single`](super::gather_single) returns), stays clear for the whole `span`:
+/// the list covers the path, and `clear` exceeds what the marble can close on any piece
+/// in the span, with `tol` to spare. Then [`earliest_impact`] finds no impact, skipping
+/// the board on this same test, bit for bit.
+pub(crate) fn path_is_clear(
+    board: &BoardSnapshot,
+    near: &NearPieces,
+    path: &Path,
+    span: f32,
+    r: f32,
+    tol: f32,
+    clear: f32,
+) -> bool {
+    debug_assert_eq!(path.t0, 0.0, "the clearance is the substep's start's");
+    let bounds = PathBounds::new(path, span, r, tol);
+    let sweep = Sweep::new(board, path, span, bounds.marble_speed);
+    sweep.covered(near, path, bounds.end, bounds.bulge, span, tol)
+        && clear > sweep.speed * span * (1.0 + 16.0 * f32::EPSILON) + tol
+}
+
 /// Whether [`earliest_impact`] of `path` over `span` finds nothing, for a marble touching
 /// the pieces in `touching` of `board`, the only board, with `list` its near-piece list:
 /// the path stays away from the board, or within what the list covers, and each listed

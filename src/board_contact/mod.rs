@@ -59,12 +59,12 @@ mod near;
 mod snapshot;
 mod touch;
 
-pub(crate) use ccd::touched_path_is_clear;
 pub use ccd::{Path, earliest_impact};
+pub(crate) use ccd::{path_is_clear, touched_path_is_clear};
 pub use near::{NEAR_MAX, NearPieces};
 pub use snapshot::{BoardCache, BoardSnapshot};
-pub(crate) use touch::gather_board;
 pub use touch::{MAX_TOUCHES, Material, Touch, TouchList, gather, touch_tolerance};
+pub(crate) use touch::{gather_board, gather_single};
 use touch::{overlaps, sphere_aabb};
 
 #[cfg(test)]

@@ -656,3 +656,84 @@ fn clearance_bounds_every_gap() {
         "{clear} clear, {tight} at the anchor"
     );
 }
+
+/// A marble that a board's list shows clear of it ([`gather_single`] returns the
+/// clearance) touches nothing there, and one whose path [`path_is_clear`] then passes meets
+/// nothing in the substep: the boards searched without the list find no touch and no
+/// impact. Marbles in the air over a still and a turning box, the scene's only board,
+/// falling, thrown at it, or moving with it; many clear at the start meet the box within
+/// the substep (the test of the path must not pass them).
+#[test]
+fn clear_paths_meet_nothing() {
+    use crate::board_contact::{gather_single, path_is_clear};
+    let mut rng = Lcg(17);
+    let (mut clear_start, mut clear_path, mut impacts, mut landing) = (0, 0, 0, 0);
+    for spin in [
+        Vec3::ZERO,
+        Vec3::new(0.0, 0.0, 0.4),
+        Vec3::new(1.5, 0.3, -0.8),
+    ] {
+        let mut cache = boards(spin);
+        cache.boards.remove(0);
+        cache.boards[0] = cache.boards[0].clone().with_poses(H);
+        cache.update_epoch();
+        let b = &cache.boards[0];
+        let up = b.rotation * Vec3::Y;
+        for k in 0..3000 {
+            let lift = R * [0.0, 0.05, 0.5, 2.0, 6.0][k % 5] * (1.0 + rng.next());
+            let x = on_the_box(b, &mut rng) + lift * up;
+            let tol = touch_tolerance(1e-4, R, x);
+            let mut list = NearPieces::default();
+            list.rebuild(&cache, x, R, tol, 4.0 * R);
+            let speed = [0.0, 0.1, 1.0, 3.0][k % 4];
+            let path = Path {
+                t0: 0.0,
+                x,
+                v: b.point_velocity(0.0, x) + rng.vec(Vec3::splat(speed)),
+                a: Vec3::new(0.0, -9.81, 0.0),
+            };
+            let material = Material::default();
+            let mut touches = TouchList::default();
+            let clear = gather_single(b, &list, x, R, tol, &material, -path.v, &mut touches);
+            let mut searched = TouchList::default();
+            gather(
+                &cache.boards,
+                None,
+                0.0,
+                x,
+                R,
+                tol,
+                &material,
+                -path.v,
+                &mut searched,
+            );
+            let impact = earliest_impact(&cache.boards, None, &path, H, R, tol, &searched);
+            impacts += usize::from(impact.is_some());
+            let Some(clear) = clear else {
+                continue;
+            };
+            assert!(
+                touches.is_empty() && searched.is_empty(),
+                "spin {spin}, case {k}"
+            );
+            clear_start += 1;
+            landing += usize::from(impact.is_some());
+            if path_is_clear(b, &list, &path, H, R, tol, clear) {
+                assert_eq!(impact, None, "spin {spin}, case {k}");
+                let listed =
+                    earliest_impact(&cache.boards, Some(&list), &path, H, R, tol, &touches);
+                assert_eq!(listed, None, "spin {spin}, case {k}");
+                clear_path += 1;
+            }
+        }
+    }
+    assert!(
+        clear_start > 5000
+            && clear_path > 2000
+            && clear_start - clear_path > 2000
+            && landing > 1000
+            && impacts > 1500,
+        "{clear_start} clear at the start ({landing} of them meet the box in the substep), \
+         {clear_path} for the substep, {impacts} impacts"
+    );
+}

@@ -263,13 +263,51 @@ pub fn gather(
 ) {
     out.clear();
     for (bi, b) in boards.iter().enumerate() {
-        gather_board::<true>(bi, b, near, t, x, r, tol, material, hint, out);
+        gather_board::<true>(bi, b, near, t, x, r, tol, material, hint, out, &mut None);
     }
+}
+
+/// [`gather`] at the substep's start (`t` = 0) in a scene of one board, `b`: the list's
+/// clearance ([`NearPieces::clearance`]) when the list covers the centre and shows the
+/// marble clear of every piece by more than `tol`, so that nothing was visited (`out`
+/// empty); `None` when the board was searched, or is out of reach.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "a hot kernel taking plain values"
+)]
+#[inline(never)]
+pub(crate) fn gather_single(
+    b: &BoardSnapshot,
+    near: &NearPieces,
+    x: Vec3,
+    r: f32,
+    tol: f32,
+    material: &Material,
+    hint: Vec3,
+    out: &mut TouchList,
+) -> Option<f32> {
+    out.clear();
+    let mut clear = None;
+    gather_board::<true>(
+        0,
+        b,
+        Some(near),
+        0.0,
+        x,
+        r,
+        tol,
+        material,
+        hint,
+        out,
+        &mut clear,
+    );
+    clear
 }
 
 /// [`gather`] on board `bi` alone, adding to `out`. Without `SEARCH`, a board that the
 /// list does not cover where it could reach the marble is not searched: `false`, and
-/// `out` as it was (the caller then gathers in full).
+/// `out` as it was (the caller then gathers in full). Where the list shows the marble
+/// clear of the board by more than `tol` (nothing visited), `clear` gets that clearance.
 #[expect(
     clippy::too_many_arguments,
     reason = "a hot kernel taking plain values"
@@ -286,6 +324,7 @@ pub(crate) fn gather_board<const SEARCH: bool>(
     material: &Material,
     hint: Vec3,
     out: &mut TouchList,
+    clear: &mut Option<f32>,
 ) -> bool {
     let reach = r + tol;
     let world = sphere_aabb(x, reach);
@@ -297,6 +336,15 @@ pub(crate) fn gather_board<const SEARCH: bool>(
     let (c, q) = b.pose_at(t);
     let inv = q.conjugate();
     let local = inv * (x - c);
+    let list = NearPieces::of(near, bi).filter(|l| l.covers(local, 0.0, tol));
+    // Clear of every piece by more than `tol`, the list finds nothing to visit.
+    if let Some(list) = list {
+        let shown = list.clearance(local, 0.0);
+        if shown > tol {
+            *clear = Some(shown);
+            return true;
+        }
+    }
     let local_hint = inv * hint;
     let visit = |part: usize, sub: u32, piece: &Piece| {
         let p = b.geometry.proximity(part, piece, local, local_hint);
@@ -319,13 +367,8 @@ pub(crate) fn gather_board<const SEARCH: bool>(
             );
         }
     };
-    match NearPieces::of(near, bi) {
-        // Clear of every piece by more than `tol`, the list finds nothing to visit.
-        Some(list) if list.covers(local, 0.0, tol) => {
-            if list.clearance(local, 0.0) <= tol {
-                list.visit(&b.geometry, visit);
-            }
-        }
+    match list {
+        Some(list) => list.visit(&b.geometry, visit),
         // A sphere's bounds are the same in any frame.
         _ if SEARCH => b.geometry.for_each_piece(&sphere_aabb(local, reach), visit),
         _ => return false,
