@@ -34,6 +34,9 @@ pub(crate) struct Grid {
     /// cells are then neighbours in memory, and no two cells share a bucket. Otherwise
     /// (`None`) cells are hashed.
     pub(super) dense: Option<(IVec3, IVec3)>,
+    /// In dense mode, whether the padding cells exist (no cell index saturated at `i32`'s
+    /// ends): every neighbour of an occupied cell is then at a fixed offset in the table.
+    padded: bool,
     /// Bucket of each body.
     bucket: Vec<u32>,
     /// Start of each bucket in `order` (`mask + 2` entries).
@@ -77,11 +80,14 @@ pub(super) fn cell_of(p: Vec3, inv: f32) -> IVec3 {
     t.saturating_sub(IVec3::from(t.as_vec3().cmpgt(q)))
 }
 
+/// The multipliers of [`hash_cell`], per axis.
+const HASH: [u32; 3] = [0x8da6_b343, 0xd816_3841, 0xcb1a_b31f];
+
 #[inline]
 pub(super) fn hash_cell(c: IVec3) -> u32 {
-    (c.x as u32).wrapping_mul(0x8da6_b343)
-        ^ (c.y as u32).wrapping_mul(0xd816_3841)
-        ^ (c.z as u32).wrapping_mul(0xcb1a_b31f)
+    (c.x as u32).wrapping_mul(HASH[0])
+        ^ (c.y as u32).wrapping_mul(HASH[1])
+        ^ (c.z as u32).wrapping_mul(HASH[2])
 }
 
 impl Grid {
@@ -127,6 +133,7 @@ impl Grid {
         let cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
         // (No ordinary body at all, as when every bound is NaN, leaves `lo` above `hi`:
         // no span, so the hashed table.)
+        self.padded = lo.cmpgt(IVec3::MIN).all() && hi.cmplt(IVec3::MAX).all();
         let table = if lo.cmple(hi).all() && cells <= 8 * n as i64 + 64 {
             self.dense = Some((lo.saturating_sub(IVec3::ONE), dims.as_ivec3()));
             cells as usize
@@ -236,8 +243,74 @@ impl Grid {
         }
     }
 
-    /// Calls `f(i, j)` once for every pair of bodies whose bound spheres overlap.
-    pub(crate) fn pairs(&self, b: &[Vec4], mut f: impl FnMut(u32, u32)) {
+    /// The pairs of ordinary bodies, in the order of [`Grid::pairs_by_bucket`], with the
+    /// forward neighbours' buckets found at less cost: in dense mode at a fixed offset
+    /// from the cell's own (the padding keeps every neighbour of an occupied cell in the
+    /// table, and a bucket holds one cell, so no cell is compared); hashed, from the
+    /// per-axis terms of the hash, each multiplied once per body.
+    pub(super) fn ordinary_pairs(&self, f: &mut impl FnMut(u32, u32)) {
+        let near = |p: Vec4, q: Vec4| {
+            let r = p.w + q.w;
+            (p.truncate() - q.truncate()).length_squared() <= r * r
+        };
+        match self.dense {
+            Some((_, dims)) if self.padded => {
+                let offset = FORWARD.map(|d| ((d.x * dims.y + d.y) * dims.z + d.z) as isize);
+                for p in 0..self.order.len() {
+                    let bp = self.bounds[p];
+                    let h = self.bucket_of(self.cells[p]);
+                    for q in p + 1..self.start[h + 1] as usize {
+                        if near(bp, self.bounds[q]) {
+                            f(self.order[p], self.order[q]);
+                        }
+                    }
+                    for o in offset {
+                        let h = h.wrapping_add_signed(o);
+                        for q in self.start[h] as usize..self.start[h + 1] as usize {
+                            if near(bp, self.bounds[q]) {
+                                f(self.order[p], self.order[q]);
+                            }
+                        }
+                    }
+                }
+            }
+            Some(_) => self.pairs_by_bucket(f),
+            None => {
+                let terms = |c: i32, m: u32| {
+                    [-1, 0, 1].map(|d: i32| (c.wrapping_add(d) as u32).wrapping_mul(m))
+                };
+                for p in 0..self.order.len() {
+                    let c = self.cells[p];
+                    let bp = self.bounds[p];
+                    let (hx, hy, hz) = (
+                        terms(c.x, HASH[0]),
+                        terms(c.y, HASH[1]),
+                        terms(c.z, HASH[2]),
+                    );
+                    for q in p + 1..self.bucket_range(c).end {
+                        if self.cells[q] == c && near(bp, self.bounds[q]) {
+                            f(self.order[p], self.order[q]);
+                        }
+                    }
+                    for d in &FORWARD {
+                        let cd = c.wrapping_add(*d);
+                        let [i, j, k] = (*d + IVec3::ONE).to_array().map(|v| v as usize);
+                        let h = ((hx[i] ^ hy[j] ^ hz[k]) & self.mask) as usize;
+                        for q in self.start[h] as usize..self.start[h + 1] as usize {
+                            if self.cells[q] == cd && near(bp, self.bounds[q]) {
+                                f(self.order[p], self.order[q]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The pairs of ordinary bodies: each (in the order of its bucket) against the later
+    /// ones of its cell, then against those of each of its [`FORWARD`] neighbours in turn,
+    /// every cell's bucket looked up.
+    pub(super) fn pairs_by_bucket(&self, f: &mut impl FnMut(u32, u32)) {
         let near = |p: Vec4, q: Vec4| {
             let r = p.w + q.w;
             (p.truncate() - q.truncate()).length_squared() <= r * r
@@ -245,14 +318,13 @@ impl Grid {
         for p in 0..self.order.len() {
             let c = self.cells[p];
             let bp = self.bounds[p];
-            let range = self.bucket_range(c);
-            for q in p + 1..range.end {
+            for q in p + 1..self.bucket_range(c).end {
                 if self.cells[q] == c && near(bp, self.bounds[q]) {
                     f(self.order[p], self.order[q]);
                 }
             }
-            for d in FORWARD {
-                let cd = c + d;
+            for d in &FORWARD {
+                let cd = c.wrapping_add(*d);
                 for q in self.bucket_range(cd) {
                     if self.cells[q] == cd && near(bp, self.bounds[q]) {
                         f(self.order[p], self.order[q]);
@@ -260,6 +332,15 @@ impl Grid {
                 }
             }
         }
+    }
+
+    /// Calls `f(i, j)` once for every pair of bodies whose bound spheres overlap.
+    pub(crate) fn pairs(&self, b: &[Vec4], mut f: impl FnMut(u32, u32)) {
+        let near = |p: Vec4, q: Vec4| {
+            let r = p.w + q.w;
+            (p.truncate() - q.truncate()).length_squared() <= r * r
+        };
+        self.ordinary_pairs(&mut f);
         // Large bodies: against every ordinary body through the cells their bound covers
         // (or all of them, when that is fewer), then against each other.
         let half = 0.5 * self.cell;

@@ -195,6 +195,36 @@ fn grid_pairs_match_brute_force() {
     );
 }
 
+/// The grid's pairs come in the order of a walk that looks up every neighbour cell's
+/// bucket ([`Grid::pairs_by_bucket`]), in both of its modes: the order of the candidate
+/// pairs, and so of the solver's rows, does not depend on how the buckets are found.
+#[test]
+fn grid_pairs_keep_the_bucket_walk_order() {
+    let mut rnd = uniform(54321);
+    let (mut dense, mut pairs) = (0, 0);
+    for case in 0..40 {
+        let spread = if case % 2 == 0 { 1.0 } else { 0.12 };
+        let n = 60 + 40 * (case / 2);
+        let b: Vec<Vec4> = (0..n)
+            .map(|_| {
+                (spread * (Vec3::new(rnd(), 0.3 * rnd(), rnd()) - 0.5)).extend(0.01 + 0.01 * rnd())
+            })
+            .collect();
+        let mut grid = Grid::default();
+        grid.build(&b);
+        dense += grid.dense.is_some() as usize;
+        let (mut fast, mut walked) = (Vec::new(), Vec::new());
+        grid.ordinary_pairs(&mut |i, j| fast.push((i, j)));
+        grid.pairs_by_bucket(&mut |i, j| walked.push((i, j)));
+        assert_eq!(fast, walked, "case {case}");
+        pairs += fast.len();
+    }
+    assert!(
+        dense > 10 && dense < 30 && pairs > 100_000,
+        "{dense} dense of 40, {pairs} pairs"
+    );
+}
+
 /// Over many substeps of marbles drifting together, jittering, a few jumping far and
 /// one leaving, the candidate pairs of [`PairSolver::cover`] hold every pair whose
 /// spheres overlap, each once, while the skin is kept (strays paired on their own)
