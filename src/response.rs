@@ -1646,6 +1646,7 @@ fn stop_at(motion: &mut Motion, after: f32) {
     motion.slip_stops = Some(motion.slip_stops.map_or(after, |t| t.min(after)));
 }
 
+#[inline(always)]
 fn record(
     contacts: &mut ContactList,
     boards: &[BoardSnapshot],
