@@ -3,10 +3,12 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use bevy_ecs::change_detection::ContiguousMut;
 use bevy_ecs::prelude::*;
 
 use super::{
-    BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped, smooth_material,
+    BoardRows, BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped,
+    smooth_material,
 };
 use crate::board_contact::{
     BoardCache, Material, NearPieces, Path, Touch, TouchList, earliest_impact, gather,
@@ -71,53 +73,30 @@ pub fn detect_board_contacts(
     mut marbles: Query<BoardStaged, Smooth>,
 ) {
     let stage = Stage::new(&config, &cache, flagged.flag(false), substep.h);
-    #[cfg(feature = "parallel")]
-    if marbles.iter().len() >= super::PARALLEL_MIN {
-        marbles.par_iter_mut().for_each(|m| {
-            super::SCRATCH.with_borrow_mut(|touches| {
-                let material = smooth_material(m.restitution);
-                super::CONTACT_LIST.with_borrow_mut(|list| {
-                    stage.detect_staged(touches, list, m, None, material);
-                })
-            })
-        });
-        return;
-    }
-    // In order, table by table over the columns as slices: the positions', carries' and
-    // velocities' change ticks are set in one pass (detection writes those of the marbles
-    // it resolves, the response those of the others, integration all of them before).
-    // Each marble's contacts are built in one list and stored in its components (the
-    // first contact in `Contacts`, `MoreContacts` only for a marble with more).
-    let (mut touches, mut list) = (TouchList::default(), ContactList::default());
+    let parallel = super::on_pool(marbles.iter().len());
+    // Table by table over the columns as slices: the positions', carries' and velocities'
+    // change ticks are set in one pass (detection writes those of the marbles it
+    // resolves, the response those of the others, integration all of them before). Each
+    // marble's contacts are built in one list and stored in its components (the first
+    // contact in `Contacts`, `MoreContacts` only for a marble with more). With `parallel`
+    // the rows go to the task pool in chunks, each walked by the same loop.
     let tables = marbles
         .contiguous_iter_mut()
         .expect("a marble's components are stored in tables");
     for mut t in tables {
-        let rows = t
-            .position
-            .iter_mut()
-            .zip(t.carry.iter_mut())
-            .zip(t.velocity.iter_mut())
-            .zip(t.start)
-            .zip(t.acceleration)
-            .zip(t.radius)
-            .zip(t.restitution)
-            .zip(t.contacts.bypass_change_detection())
-            .zip(t.more.bypass_change_detection())
-            .zip(t.near.bypass_change_detection());
-        for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
-            stage.detect(
-                &mut touches,
-                (x, carry, v, None),
-                start,
-                a,
-                r.0,
-                smooth_material(e),
-                &mut list,
-                near,
-            );
-            list.store(contacts, more);
-        }
+        let rows = BoardRows {
+            position: ContiguousMut::split(t.position).0,
+            carry: ContiguousMut::split(t.carry).0,
+            velocity: ContiguousMut::split(t.velocity).0,
+            start: t.start,
+            acceleration: t.acceleration,
+            radius: t.radius,
+            restitution: t.restitution,
+            contacts: t.contacts.bypass_change_detection(),
+            more: t.more.bypass_change_detection(),
+            near: t.near.bypass_change_detection(),
+        };
+        super::run_rows(rows, parallel, |rows| stage.detect_rows(rows));
     }
 }
 
@@ -213,6 +192,38 @@ impl<'a> Stage<'a> {
             contacts.bypass_change_detection(),
             more.bypass_change_detection(),
         );
+    }
+
+    /// [`Stage::detect`] for every row of a table's (or a chunk's) marbles that do not
+    /// spin, in order.
+    #[inline(always)]
+    fn detect_rows(&self, t: BoardRows<'_>) {
+        let (mut touches, mut list) = (TouchList::default(), ContactList::default());
+        let rows = t
+            .position
+            .iter_mut()
+            .zip(t.carry.iter_mut())
+            .zip(t.velocity.iter_mut())
+            .zip(t.start)
+            .zip(t.acceleration)
+            .zip(t.radius)
+            .zip(t.restitution)
+            .zip(t.contacts.iter_mut())
+            .zip(t.more.iter_mut())
+            .zip(t.near.iter_mut());
+        for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
+            self.detect(
+                &mut touches,
+                (x, carry, v, None),
+                start,
+                a,
+                r.0,
+                smooth_material(e),
+                &mut list,
+                near,
+            );
+            list.store(contacts, more);
+        }
     }
 
     /// [`NearPieces::still_face`] for a marble that does not spin (`still`: else `None`).

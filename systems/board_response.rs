@@ -1,11 +1,13 @@
 //! Marble–board response: the event loop for the marbles detection flagged, then the
 //! spinning marbles' orientations turned by their spin.
 
+use bevy_ecs::change_detection::ContiguousMut;
 use bevy_ecs::prelude::*;
 
 use super::board_detection::Flagged;
 use super::{
-    BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped, smooth_material,
+    BoardRows, BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped,
+    smooth_material,
 };
 use crate::board_contact::{
     BoardCache, BoardSnapshot, NearPieces, TouchList, gather, touch_tolerance,
@@ -54,56 +56,46 @@ pub fn respond_to_boards(
         r: r.0,
         material: smooth_material(e),
     };
-    #[cfg(feature = "parallel")]
-    if marbles.iter().len() >= super::PARALLEL_MIN {
-        marbles.par_iter_mut().for_each(|m| {
-            if m.contacts.nothing_pending() {
-                return;
-            }
-            super::SCRATCH.with_borrow_mut(|touches| {
-                let state = (
-                    m.position.into_inner(),
-                    m.carry.into_inner(),
-                    m.velocity.into_inner(),
-                );
-                let marble = marble(m.start, m.acceleration, m.radius, m.restitution);
-                respond(
-                    touches,
-                    state,
-                    m.start,
-                    marble,
-                    (m.contacts.into_inner(), m.more.into_inner()),
-                    &m.near,
-                )
-            })
-        });
-        return;
-    }
-    // In order, table by table over the columns as slices (see `detect_board_contacts`).
-    let mut touches = TouchList::default();
+    let parallel = super::on_pool(marbles.iter().len());
+    // Table by table over the columns as slices (see `detect_board_contacts`).
     let tables = marbles
         .contiguous_iter_mut()
         .expect("a marble's components are stored in tables");
     for mut t in tables {
-        let rows = t
-            .position
-            .iter_mut()
-            .zip(t.carry.iter_mut())
-            .zip(t.velocity.iter_mut())
-            .zip(t.start)
-            .zip(t.acceleration)
-            .zip(t.radius)
-            .zip(t.restitution)
-            .zip(t.contacts.iter_mut())
-            .zip(t.more.bypass_change_detection())
-            .zip(t.near.iter());
-        for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
-            if !contacts.nothing_pending() {
-                let marble = marble(start, a, r, e);
-                let stored = (contacts, more);
-                respond(&mut touches, (x, carry, v), start, marble, stored, near);
+        let rows = BoardRows {
+            position: ContiguousMut::split(t.position).0,
+            carry: ContiguousMut::split(t.carry).0,
+            velocity: ContiguousMut::split(t.velocity).0,
+            start: t.start,
+            acceleration: t.acceleration,
+            radius: t.radius,
+            restitution: t.restitution,
+            contacts: ContiguousMut::split(t.contacts).0,
+            more: t.more.bypass_change_detection(),
+            near: t.near.bypass_change_detection(),
+        };
+        super::run_rows(rows, parallel, |t| {
+            let mut touches = TouchList::default();
+            let rows = t
+                .position
+                .iter_mut()
+                .zip(t.carry.iter_mut())
+                .zip(t.velocity.iter_mut())
+                .zip(t.start)
+                .zip(t.acceleration)
+                .zip(t.radius)
+                .zip(t.restitution)
+                .zip(t.contacts.iter_mut())
+                .zip(t.more.iter_mut())
+                .zip(t.near.iter());
+            for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
+                if !contacts.nothing_pending() {
+                    let marble = marble(start, a, r, e);
+                    let stored = (contacts, more);
+                    respond(&mut touches, (x, carry, v), start, marble, stored, near);
+                }
             }
-        }
+        });
     }
 }
 

@@ -90,6 +90,120 @@ pub(crate) fn smooth_material(restitution: &Restitution) -> Material {
     }
 }
 
+/// One table's columns of what the marble–board stages read and write ([`BoardStaged`]),
+/// as slices of equal length: what a stage walks in order, or hands to the task pool in
+/// chunks ([`run_rows`]).
+pub(crate) struct BoardRows<'a> {
+    pub position: &'a mut [Position],
+    pub carry: &'a mut [PositionCarry],
+    pub velocity: &'a mut [Velocity],
+    pub start: &'a [StepStart],
+    pub acceleration: &'a [Acceleration],
+    pub radius: &'a [Radius],
+    pub restitution: &'a [Restitution],
+    pub contacts: &'a mut [Contacts],
+    pub more: &'a mut [MoreContacts],
+    pub near: &'a mut [NearPieces],
+}
+
+/// Slices of one table's columns that split into chunks of rows.
+#[cfg_attr(
+    not(feature = "parallel"),
+    expect(dead_code, reason = "only the task pool splits rows")
+)]
+pub(crate) trait Rows: Sized + Send {
+    /// How many rows.
+    fn len(&self) -> usize;
+    /// The first `mid` rows and the rest.
+    fn split_at(self, mid: usize) -> (Self, Self);
+}
+
+impl Rows for BoardRows<'_> {
+    fn len(&self) -> usize {
+        self.position.len()
+    }
+
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let (p0, p1) = self.position.split_at_mut(mid);
+        let (c0, c1) = self.carry.split_at_mut(mid);
+        let (v0, v1) = self.velocity.split_at_mut(mid);
+        let (s0, s1) = self.start.split_at(mid);
+        let (a0, a1) = self.acceleration.split_at(mid);
+        let (r0, r1) = self.radius.split_at(mid);
+        let (e0, e1) = self.restitution.split_at(mid);
+        let (k0, k1) = self.contacts.split_at_mut(mid);
+        let (m0, m1) = self.more.split_at_mut(mid);
+        let (n0, n1) = self.near.split_at_mut(mid);
+        let head = BoardRows {
+            position: p0,
+            carry: c0,
+            velocity: v0,
+            start: s0,
+            acceleration: a0,
+            radius: r0,
+            restitution: e0,
+            contacts: k0,
+            more: m0,
+            near: n0,
+        };
+        let tail = BoardRows {
+            position: p1,
+            carry: c1,
+            velocity: v1,
+            start: s1,
+            acceleration: a1,
+            radius: r1,
+            restitution: e1,
+            contacts: k1,
+            more: m1,
+            near: n1,
+        };
+        (head, tail)
+    }
+}
+
+/// Runs `each` over a table's `rows`: with the `parallel` feature and `parallel` set, in
+/// chunks on bevy's compute task pool (four a thread, the calling thread taking its share
+/// while it waits), in order otherwise. Each row's work depends on that row alone, so
+/// both give the same bits; a chunk is walked by the same loop as a whole table.
+#[cfg_attr(
+    not(feature = "parallel"),
+    expect(unused_variables, reason = "one thread")
+)]
+#[inline(always)]
+pub(crate) fn run_rows<R: Rows>(rows: R, parallel: bool, each: impl Fn(R) + Sync) {
+    #[cfg(feature = "parallel")]
+    if parallel {
+        let pool = bevy_tasks::ComputeTaskPool::get();
+        let chunk = rows.len().div_ceil(4 * pool.thread_num().max(1)).max(256);
+        let each = &each;
+        pool.scope(|scope| {
+            let mut rows = rows;
+            while rows.len() > chunk {
+                let (head, tail) = rows.split_at(chunk);
+                scope.spawn(async move { each(head) });
+                rows = tail;
+            }
+            scope.spawn(async move { each(rows) });
+        });
+        return;
+    }
+    each(rows);
+}
+
+/// Whether a stage of `n` marbles runs on the task pool (the `parallel` feature and at
+/// least [`PARALLEL_MIN`] marbles).
+#[inline]
+pub(crate) fn on_pool(n: usize) -> bool {
+    #[cfg(feature = "parallel")]
+    return n >= PARALLEL_MIN;
+    #[cfg(not(feature = "parallel"))]
+    {
+        let _ = n;
+        false
+    }
+}
+
 /// With the `parallel` feature, queries of fewer marbles than this run in order: handing
 /// a few marbles to the task pool costs more than their work (a study of thousands of
 /// one-marble scenes ran ten times slower).
@@ -98,8 +212,8 @@ pub(crate) const PARALLEL_MIN: usize = 1024;
 
 thread_local! {
     /// Each thread's scratch [`ContactList`](crate::components::ContactList), in which the
-    /// marble–board detection of a marble that spins, or of any marble on the task pool,
-    /// builds its contacts before storing them (rather than a fresh list per marble).
+    /// marble–board detection of a marble that spins builds its contacts before storing
+    /// them (rather than a fresh list per marble).
     pub(crate) static CONTACT_LIST: std::cell::RefCell<crate::components::ContactList> =
         std::cell::RefCell::new(crate::components::ContactList::default());
 }
