@@ -3,7 +3,6 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use bevy_ecs::change_detection::ContiguousMut;
 use bevy_ecs::prelude::*;
 
 use super::{
@@ -83,19 +82,8 @@ pub fn detect_board_contacts(
     let tables = marbles
         .contiguous_iter_mut()
         .expect("a marble's components are stored in tables");
-    for mut t in tables {
-        let rows = BoardRows {
-            position: ContiguousMut::split(t.position).0,
-            carry: ContiguousMut::split(t.carry).0,
-            velocity: ContiguousMut::split(t.velocity).0,
-            start: t.start,
-            acceleration: t.acceleration,
-            radius: t.radius,
-            restitution: t.restitution,
-            contacts: t.contacts.bypass_change_detection(),
-            more: t.more.bypass_change_detection(),
-            near: t.near.bypass_change_detection(),
-        };
+    for t in tables {
+        let rows = BoardRows::of_table(t, false);
         super::run_rows(rows, parallel, |rows| stage.detect_rows(rows));
     }
 }

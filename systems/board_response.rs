@@ -1,7 +1,6 @@
 //! Marble–board response: the event loop for the marbles detection flagged, then the
 //! spinning marbles' orientations turned by their spin.
 
-use bevy_ecs::change_detection::ContiguousMut;
 use bevy_ecs::prelude::*;
 
 use super::board_detection::Flagged;
@@ -61,19 +60,8 @@ pub fn respond_to_boards(
     let tables = marbles
         .contiguous_iter_mut()
         .expect("a marble's components are stored in tables");
-    for mut t in tables {
-        let rows = BoardRows {
-            position: ContiguousMut::split(t.position).0,
-            carry: ContiguousMut::split(t.carry).0,
-            velocity: ContiguousMut::split(t.velocity).0,
-            start: t.start,
-            acceleration: t.acceleration,
-            radius: t.radius,
-            restitution: t.restitution,
-            contacts: ContiguousMut::split(t.contacts).0,
-            more: t.more.bypass_change_detection(),
-            near: t.near.bypass_change_detection(),
-        };
+    for t in tables {
+        let rows = BoardRows::of_table(t, true);
         super::run_rows(rows, parallel, |t| {
             let mut touches = TouchList::default();
             let rows = t

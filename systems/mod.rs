@@ -21,6 +21,7 @@
 //! | `Finish` | `forces.rs` | on the last substep: clear forces |
 //! | `Report` | `events.rs` | on the last substep: contacts started and ended; sensors carried by boards placed, then sensors entered and left |
 
+use bevy_ecs::change_detection::ContiguousMut;
 use bevy_ecs::prelude::*;
 use bevy_ecs::query::QueryData;
 
@@ -104,6 +105,33 @@ pub(crate) struct BoardRows<'a> {
     pub contacts: &'a mut [Contacts],
     pub more: &'a mut [MoreContacts],
     pub near: &'a mut [NearPieces],
+}
+
+impl<'a> BoardRows<'a> {
+    /// One table's rows of a [`BoardStaged`] query. The positions', carries' and
+    /// velocities' change ticks are set for the whole table in one pass (detection writes
+    /// those of the marbles it resolves, the response those of the others); the contacts'
+    /// only with `contacts_changed` (the response's rewrite), the other lists' never (they
+    /// are the stages' own records).
+    pub(crate) fn of_table(t: BoardStagedContiguousItem<'a, '_>, contacts_changed: bool) -> Self {
+        let contacts = if contacts_changed {
+            ContiguousMut::split(t.contacts).0
+        } else {
+            ContiguousMut::bypass_change_detection_split(t.contacts).0
+        };
+        BoardRows {
+            position: ContiguousMut::split(t.position).0,
+            carry: ContiguousMut::split(t.carry).0,
+            velocity: ContiguousMut::split(t.velocity).0,
+            start: t.start,
+            acceleration: t.acceleration,
+            radius: t.radius,
+            restitution: t.restitution,
+            contacts,
+            more: ContiguousMut::bypass_change_detection_split(t.more).0,
+            near: ContiguousMut::bypass_change_detection_split(t.near).0,
+        }
+    }
 }
 
 /// Slices of one table's columns that split into chunks of rows.
