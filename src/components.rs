@@ -770,7 +770,10 @@ impl ContactList {
         self.pending = Pending::None;
     }
 
-    /// Records a contact; when full, keeps the deepest ones.
+    /// Records a contact; when full, keeps the deepest ones. Always inlined: the caller
+    /// builds the contact in its place (passed by reference, the 48-byte contact would be
+    /// read back in wide loads from its narrow stores, a store-forwarding stall each).
+    #[inline(always)]
     pub(crate) fn push(&mut self, contact: Contact) {
         if (self.len as usize) < MAX_CONTACTS {
             self.list[self.len as usize] = contact;
