@@ -73,10 +73,8 @@ pub fn detect_board_contacts(
 ) {
     let stage = Stage::new(&config, &cache, flagged.flag(false), substep.h);
     let parallel = super::on_pool(marbles.iter().len());
-    // Table by table over the columns as slices: the positions', carries' and velocities'
-    // change ticks are set in one pass (detection writes those of the marbles it
-    // resolves, the response those of the others, integration all of them before). Each
-    // marble's contacts are built in one list and stored in its components (the first
+    // Table by table over the columns as slices (`BoardRows::of_table`: which change
+    // ticks are set, and why). Each marble's contacts are built in one list and stored in its components (the first
     // contact in `Contacts`, `MoreContacts` only for a marble with more). With `parallel`
     // the rows go to the task pool in chunks, each walked by the same loop.
     let tables = marbles
