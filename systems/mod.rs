@@ -140,11 +140,57 @@ impl<'a> BoardRows<'a> {
     expect(dead_code, reason = "only the task pool splits rows")
 )]
 pub(crate) trait Rows: Sized + Send {
+    /// The fewest rows [`run_rows`] hands the task pool as one chunk.
+    const MIN_CHUNK: usize = 256;
     /// How many rows.
     fn len(&self) -> usize;
     /// The first `mid` rows and the rest.
     fn split_at(self, mid: usize) -> (Self, Self);
 }
+
+impl<T: Sync> Rows for &[T] {
+    fn len(&self) -> usize {
+        <[T]>::len(self)
+    }
+
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        <[T]>::split_at(self, mid)
+    }
+}
+
+impl<T: Send> Rows for &mut [T] {
+    fn len(&self) -> usize {
+        <[T]>::len(self)
+    }
+
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        <[T]>::split_at_mut(self, mid)
+    }
+}
+
+/// Columns side by side (a tuple of slices, or of other [`Rows`]) split together; the
+/// first says how many rows there are.
+macro_rules! tuple_rows {
+    ($(($R:ident, $r:ident)),+) => {
+        impl<$($R: Rows),+> Rows for ($($R,)+) {
+            fn len(&self) -> usize {
+                self.0.len()
+            }
+
+            fn split_at(self, mid: usize) -> (Self, Self) {
+                let ($($r,)+) = self;
+                $(let $r = $r.split_at(mid);)+
+                (($($r.0,)+), ($($r.1,)+))
+            }
+        }
+    };
+}
+tuple_rows!((A, a), (B, b));
+tuple_rows!((A, a), (B, b), (C, c));
+tuple_rows!((A, a), (B, b), (C, c), (D, d));
+tuple_rows!((A, a), (B, b), (C, c), (D, d), (E, e));
+tuple_rows!((A, a), (B, b), (C, c), (D, d), (E, e), (F, f));
+tuple_rows!((A, a), (B, b), (C, c), (D, d), (E, e), (F, f), (G, g));
 
 impl Rows for BoardRows<'_> {
     fn len(&self) -> usize {
@@ -203,7 +249,10 @@ pub(crate) fn run_rows<R: Rows>(rows: R, parallel: bool, each: impl Fn(R) + Sync
     #[cfg(feature = "parallel")]
     if parallel {
         let pool = bevy_tasks::ComputeTaskPool::get();
-        let chunk = rows.len().div_ceil(4 * pool.thread_num().max(1)).max(256);
+        let chunk = rows
+            .len()
+            .div_ceil(4 * pool.thread_num().max(1))
+            .max(R::MIN_CHUNK);
         let each = &each;
         pool.scope(|scope| {
             let mut rows = rows;

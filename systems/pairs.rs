@@ -14,7 +14,7 @@ use crate::components::{
     Radius, Restitution, StepStart, Velocity, compensated_add, contact_iter, contact_slices,
 };
 use crate::config::{StepConfig, Substep};
-use crate::pairs::{BoardTouch, Body, MarbleContacts, PairParams, PairSolver};
+use crate::pairs::{BoardTouch, Body, Gathered, MarbleContacts, PairParams, PairSolver};
 
 fn params(config: &StepConfig, h: f32) -> PairParams {
     PairParams {
@@ -170,6 +170,16 @@ fn write_back(
     velocity.0 = body.v;
 }
 
+impl super::Rows for Gathered<'_> {
+    fn len(&self) -> usize {
+        Gathered::len(self)
+    }
+
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        Gathered::split_at(self, mid)
+    }
+}
+
 /// What the contact stage (`PairContacts`) reads and writes of a marble.
 #[derive(QueryData)]
 #[query_data(mutable, contiguous(immutable))]
@@ -219,105 +229,107 @@ pub fn pair_contacts(
 ) {
     let h = substep.h;
     let params = params(&config, h);
+    let config = &*config;
     let solver = solver.as_mut();
+    let n = marbles.iter().len();
+    let parallel = super::on_pool(n);
     // 1. The broad phase first: marbles spread apart stop there.
     recorded.list.clear();
-    solver.begin(marbles.iter().len(), &mut recorded);
-    // Table by table, over the columns as slices (the order of the query's items).
+    solver.begin(n, &mut recorded);
+    // Table by table, over the columns as slices (the order of the query's items); with
+    // `parallel`, in chunks on the task pool.
     let tables = marbles
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
     for t in tables {
-        let paths = t
-            .velocity
-            .iter()
-            .zip(t.acceleration)
-            .zip(t.contacts)
-            .zip(t.more)
-            .map(|(((v, a), contacts), more)| free_path(&config, h, v.0, a.0, (contacts, more)));
-        let centres = t.position.iter().map(|x| x.0);
-        let radii = t.radius.iter().map(|r| r.0);
-        solver.push_contact_spheres(&params, t.entity, centres, radii, paths);
+        let out = solver.gather_table(t.entity.len());
+        let rows = (
+            t.entity,
+            (t.position, t.velocity, t.acceleration),
+            (t.contacts, t.more, t.radius),
+            out,
+        );
+        super::run_rows(
+            rows,
+            parallel,
+            |(entities, (x, v, a), (contacts, more, r), out)| {
+                let rows = x.iter().zip(v).zip(a).zip(contacts).zip(more).zip(r).map(
+                    |(((((x, v), a), contacts), more), r)| {
+                        let d = free_path(config, h, v.0, a.0, (contacts, more));
+                        (PairSolver::contact_sphere(&params, x.0, d, r.0), r.0, d)
+                    },
+                );
+                out.write_with_paths(entities, rows);
+            },
+        );
     }
-    if !solver.cover_gathered() {
+    if !solver.cover_gathered(parallel) {
         solver.forget_contacts();
         return;
     }
-    // 2. The bodies at the substep's start, each on the free path pushed with its sphere,
-    // in the same table order.
+    // 2. The bodies at the substep's start, each on the free path gathered with its
+    // sphere: the marbles of the candidate pairs when they are few, else every marble (in
+    // the same table order).
+    solver.select_bodies();
     solver.clear_bodies();
+    let body = |t: &PairContactStagedReadOnlyContiguousItem<'_, '_>, i: usize| Body {
+        entity: t.entity[i],
+        x: t.position[i].0,
+        x0: t.position[i].0,
+        v: t.velocity[i].0,
+        v0: t.velocity[i].0,
+        w: t.mass[i].inverse(),
+        r: t.radius[i].0,
+        e: t.restitution[i].0,
+        a: t.acceleration[i].0,
+        d: Vec3::ZERO,
+        omega: t.spin.map_or(Vec3::ZERO, |w| w[i].0),
+        spins: config.rolling && t.spin.is_some(),
+        mu: t.friction.map_or(0.0, |f| f[i].0),
+    };
     let tables = marbles
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
-    for t in tables {
-        let rows = t
-            .entity
-            .iter()
-            .zip(t.position)
-            .zip(t.velocity)
-            .zip(t.mass)
-            .zip(t.radius)
-            .zip(t.restitution)
-            .zip(t.acceleration);
-        for (i, ((((((&entity, x), v), mass), r), e), a)) in rows.enumerate() {
-            solver.push_body_on_free_path(Body {
-                entity,
-                x: x.0,
-                x0: x.0,
-                v: v.0,
-                v0: v.0,
-                w: mass.inverse(),
-                r: r.0,
-                e: e.0,
-                a: a.0,
-                d: Vec3::ZERO,
-                omega: t.spin.map_or(Vec3::ZERO, |w| w[i].0),
-                spins: config.rolling && t.spin.is_some(),
-                mu: t.friction.map_or(0.0, |f| f[i].0),
-            });
-        }
+    let mut rows = TableRows::new(tables, |t| t.entity.len());
+    for k in 0..solver.chosen() {
+        let (t, i) = rows.seek(solver.marble_of(k));
+        solver.push_body_on_free_path(body(t, i));
     }
     if !solver.find_touching(&params) {
         return;
     }
-    // 3. The board contacts of the marbles in the rows: the contact stage reads no other
+    // 3. The board contacts of the bodies in the rows: the contact stage reads no other
     // marble's boards (its cascade and passes run on the rows' marbles).
     solver.begin_board_touches();
-    for (body, m) in (0usize..).zip(&marbles) {
+    let tables = marbles
+        .contiguous_iter()
+        .expect("a marble's components are stored in tables");
+    let mut rows = TableRows::new(tables, |t| t.entity.len());
+    for body in 0..solver.chosen() {
         if !solver.in_rows(body) {
             solver.next_body_touches();
             continue;
         }
+        let (t, i) = rows.seek(solver.marble_of(body));
         // The contacts were recorded during the last substep; its boards have since
         // moved on to this substep's start.
-        let e = m.restitution.0;
+        let (e, r) = (t.restitution[i].0, t.radius[i].0);
         let b = solver.body(body);
-        let (x, r) = (b.x, m.radius.0);
+        let x = b.x;
         let tol = touch_tolerance(config.contact_tolerance, r, x);
         let start = Some((x, r, tol, b.d, b.a));
-        let contacts = (m.contacts, m.more);
+        let contacts = (&t.contacts[i], &t.more[i]);
         board_touches(solver, &cache, body as u32, contacts, e, h, 0.0, start);
         let b = solver.body(body);
         let state = (b.x, b.v, b.a, b.d);
-        speculative_touches(
-            solver,
-            &cache,
-            body as u32,
-            state,
-            m.radius.0,
-            contacts,
-            m.near,
-            e,
-            h,
-        );
+        let near = &t.near[i];
+        speculative_touches(solver, &cache, body as u32, state, r, contacts, near, e, h);
     }
     solver.end_board_touches();
-    // 4. Solve, and write back what changed.
+    // 4. Solve, and write back what changed: a selection's bodies found by entity, every
+    // marble's in order.
     solver.solve_touching(&params, &mut recorded);
-    for (k, mut m) in (0usize..).zip(&mut marbles) {
-        let Some(body) = solver.changed_body(k) else {
-            continue;
-        };
+    let write = |body: &Body, m: &mut PairContactStagedItem<'_, '_>| {
         write_back(
             config.compensated,
             body,
@@ -331,6 +343,58 @@ pub fn pair_contacts(
         {
             spin.0 = body.omega;
         }
+    };
+    if solver.selected().is_some() {
+        for k in 0..solver.chosen() {
+            if let Some(body) = solver.changed_body(k) {
+                let mut m = marbles
+                    .get_mut(body.entity)
+                    .expect("a body's marble is stepped");
+                write(body, &mut m);
+            }
+        }
+    } else {
+        for (k, mut m) in (0usize..).zip(&mut marbles) {
+            if let Some(body) = solver.changed_body(k) {
+                write(body, &mut m);
+            }
+        }
+    }
+}
+
+/// The tables of a query's contiguous iteration, walked to the rows of ascending marble
+/// indices (counted over the tables in order).
+struct TableRows<T, I, L> {
+    tables: I,
+    table: Option<T>,
+    /// Index of the current table's first marble, and its length.
+    first: usize,
+    len: usize,
+    len_of: L,
+}
+
+impl<T, I: Iterator<Item = T>, L: Fn(&T) -> usize> TableRows<T, I, L> {
+    fn new(tables: I, len_of: L) -> Self {
+        TableRows {
+            tables,
+            table: None,
+            first: 0,
+            len: 0,
+            len_of,
+        }
+    }
+
+    /// The table and row of marble `m` (not before the last one sought).
+    #[inline]
+    fn seek(&mut self, m: usize) -> (&T, usize) {
+        while m >= self.first + self.len || self.table.is_none() {
+            self.first += self.len;
+            let table = self.tables.next().expect("marble index within the tables");
+            self.len = (self.len_of)(&table);
+            self.table = Some(table);
+        }
+        let table = self.table.as_ref().expect("a table");
+        (table, m - self.first)
     }
 }
 
@@ -348,59 +412,67 @@ pub fn pair_impacts(
     let params = params(&config, h);
     let solver = solver.as_mut();
     // 1. The broad phase first, on the paths the marbles took: marbles spread apart stop
-    // there.
-    solver.begin(marbles.iter().len(), &mut recorded);
+    // there. Table by table; with `parallel`, in chunks on the task pool.
+    let n = marbles.iter().len();
+    let parallel = super::on_pool(n);
+    solver.begin(n, &mut recorded);
     let tables = marbles
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
     for t in tables {
-        let ends = t
-            .start
-            .iter()
-            .zip(t.position)
-            .map(|(s, x)| (s.position, x.0));
-        let radii = t.radius.iter().map(|r| r.0);
-        solver.push_impact_spheres(&params, t.entity, ends, radii);
-    }
-    if !solver.cover_gathered() {
-        return;
-    }
-    // 2. The bodies: where each marble started the substep and where it ended.
-    solver.clear_bodies();
-    let tables = marbles
-        .contiguous_iter()
-        .expect("a marble's components are stored in tables");
-    for t in tables {
-        let rows = t
-            .entity
-            .iter()
-            .zip(t.position)
-            .zip(t.start)
-            .zip(t.velocity)
-            .zip(t.mass)
-            .zip(t.radius)
-            .zip(t.restitution);
-        for ((((((&entity, x), start), v), mass), r), e) in rows {
-            solver.push_body(Body {
-                entity,
-                x: x.0,
-                x0: start.position,
-                v: v.0,
-                v0: start.velocity,
-                w: mass.inverse(),
-                r: r.0,
-                e: e.0,
-                a: Vec3::ZERO,
-                d: Vec3::ZERO,
-                omega: Vec3::ZERO,
-                spins: false,
-                mu: 0.0,
+        let out = solver.gather_table(t.entity.len());
+        let rows = (t.entity, t.start, t.position, t.radius, out);
+        super::run_rows(rows, parallel, |(entities, start, x, r, out)| {
+            let rows = start.iter().zip(x).zip(r).map(|((s, x), r)| {
+                let sphere = PairSolver::impact_sphere(&params, s.position, x.0, r.0);
+                (sphere, r.0)
             });
-        }
+            out.write(entities, rows);
+        });
     }
-    if !solver.find_impacts(&params) {
+    if !solver.cover_gathered(parallel) {
         return;
     }
+    // 2. The bodies: where each marble started the substep and where it ended. The
+    // marbles of the candidate pairs first, when they are few, to look for a deep
+    // impact; once one is found every marble, since what follows may reach any.
+    solver.select_bodies();
+    solver.clear_bodies();
+    let body = |t: &PairImpactStagedReadOnlyContiguousItem<'_, '_>, i: usize| Body {
+        entity: t.entity[i],
+        x: t.position[i].0,
+        x0: t.start[i].position,
+        v: t.velocity[i].0,
+        v0: t.start[i].velocity,
+        w: t.mass[i].inverse(),
+        r: t.radius[i].0,
+        e: t.restitution[i].0,
+        a: Vec3::ZERO,
+        d: Vec3::ZERO,
+        omega: Vec3::ZERO,
+        spins: false,
+        mu: 0.0,
+    };
+    if solver.selected().is_some() {
+        let tables = marbles
+            .contiguous_iter()
+            .expect("a marble's components are stored in tables");
+        let mut rows = TableRows::new(tables, |t| t.entity.len());
+        for k in 0..solver.chosen() {
+            let (t, i) = rows.seek(solver.marble_of(k));
+            solver.push_body(body(t, i));
+        }
+    } else {
+        push_every_body(solver, &marbles, body);
+    }
+    if !solver.any_deep_impact(&params) {
+        return;
+    }
+    if solver.select_every_marble_for_impacts() {
+        solver.clear_bodies();
+        push_every_body(solver, &marbles, body);
+    }
+    solver.find_impacts(&params);
     // 3. Every marble's board contacts of this substep; where it would have got without
     // its boards, and when one first changed its path (a touch found after the substep's
     // start).
@@ -442,5 +514,21 @@ pub fn pair_impacts(
             &mut m.carry,
             &mut m.velocity,
         );
+    }
+}
+
+/// Phase 2 of the impact stage for every marble, in order, table by table.
+fn push_every_body(
+    solver: &mut PairSolver,
+    marbles: &Query<PairImpactStaged, Stepped>,
+    body: impl Fn(&PairImpactStagedReadOnlyContiguousItem<'_, '_>, usize) -> Body,
+) {
+    let tables = marbles
+        .contiguous_iter()
+        .expect("a marble's components are stored in tables");
+    for t in tables {
+        for i in 0..t.entity.len() {
+            solver.push_body(body(&t, i));
+        }
     }
 }

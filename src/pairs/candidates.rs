@@ -1,6 +1,8 @@
 //! The kept candidate pairs (a Verlet list over the substeps) and the strays that left
 //! their skins.
 
+use std::sync::atomic::AtomicUsize;
+
 use super::*;
 
 /// Room added around each marble's bound sphere when the candidate pairs are found, as a
@@ -12,21 +14,70 @@ pub(super) const SKIN: f32 = 0.25;
 /// their skins (fewer are paired one by one).
 pub(super) const STRAY_SHARE: usize = 8;
 
+/// Bodies per block of the common drift's sum ([`PairSolver::cover`]).
+pub(super) const DRIFT_BLOCK: usize = 1024;
+
+/// Blocks of [`DRIFT_BLOCK`] bodies: each block's slot for its sum, its spheres and its
+/// bounds (the last block may be short).
+struct DriftBlocks<'a> {
+    sums: &'a mut [Vec3],
+    spheres: &'a [Vec4],
+    bound: &'a [Vec4],
+}
+
+impl crate::systems::Rows for DriftBlocks<'_> {
+    const MIN_CHUNK: usize = 1;
+
+    fn len(&self) -> usize {
+        self.sums.len()
+    }
+
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let at = (mid * DRIFT_BLOCK).min(self.spheres.len());
+        let (sums0, sums1) = self.sums.split_at_mut(mid);
+        let (s0, s1) = self.spheres.split_at(at);
+        let (b0, b1) = self.bound.split_at(at);
+        let head = DriftBlocks {
+            sums: sums0,
+            spheres: s0,
+            bound: b0,
+        };
+        let tail = DriftBlocks {
+            sums: sums1,
+            spheres: s1,
+            bound: b1,
+        };
+        (head, tail)
+    }
+}
+
 /// The candidate pairs of the last [`PairSolver::cover`]: the standing candidates of
-/// marbles that stayed inside their bounds, and the strays' pairs.
+/// marbles that stayed inside their bounds, and the strays' pairs; with `local`, in the
+/// bodies' indices of a selection ([`PairSolver::select_bodies`]).
 pub(super) fn candidate_pairs<'a>(
     candidates: &'a [(u32, u32)],
     extra: &'a [(u32, u32)],
     stray: &'a [bool],
     strays: &[u32],
+    local: Option<&'a [u32]>,
 ) -> impl Iterator<Item = (u32, u32)> + 'a {
     let any = !strays.is_empty();
     candidates
         .iter()
         .filter(move |&&(i, j)| !(any && (stray[i as usize] || stray[j as usize])))
         .chain(extra)
-        .copied()
+        .map(move |&(i, j)| match local {
+            Some(local) => (local[i as usize], local[j as usize]),
+            None => (i, j),
+        })
 }
+
+/// The bodies are the marbles of the candidate pairs, not every marble, when those are
+/// at most one marble in this many ([`PairSolver::select_bodies`]).
+pub(super) const SELECT_SHARE: usize = 8;
+
+/// [`PairSolver::local`]'s mark of a marble that is not a body.
+pub(super) const NOT_A_BODY: u32 = u32::MAX;
 
 impl PairSolver {
     /// Makes the candidate pairs ([`candidate_pairs`]) hold every pair of bodies whose
@@ -42,49 +93,53 @@ impl PairSolver {
     /// in [`STRAY_SHARE`] strayed, the candidates are found afresh.
     #[cfg(test)]
     pub(super) fn cover(&mut self, sphere: impl Fn(&Body) -> Vec4) {
-        self.spheres.clear();
-        self.radii.clear();
-        self.gathered.clear();
-        for b in &self.bodies {
-            self.spheres.push(sphere(b));
-            self.radii.push(b.r);
-            self.gathered.push(b.entity);
-        }
-        self.cover_spheres();
+        let n = self.bodies.len();
+        self.begin(n, &mut MarbleContacts::default());
+        let entities: Vec<Entity> = self.bodies.iter().map(|b| b.entity).collect();
+        let rows: Vec<(Vec4, f32)> = self.bodies.iter().map(|b| (sphere(b), b.r)).collect();
+        self.gather_table(n).write(&entities, rows.into_iter());
+        self.cover_spheres(false);
     }
 
-    /// [`PairSolver::cover`] on the gathered spheres.
-    pub(super) fn cover_spheres(&mut self) {
+    /// [`PairSolver::cover`] on the gathered spheres; with `parallel`, the passes over
+    /// the bodies in chunks on the task pool ([`crate::systems::run_rows`]), with the
+    /// same bits.
+    pub(super) fn cover_spheres(&mut self, parallel: bool) {
         let n = self.spheres.len();
         self.extra.clear();
         self.strays.clear();
-        self.stray.clear();
         self.stray.resize(n, false);
-        let same =
-            self.skin_valid && n > 0 && self.bound.len() == n && self.entities == self.gathered;
+        self.select_every_marble();
+        let same = self.skin_valid
+            && n > 0
+            && self.bound.len() == n
+            && !self.entities_changed.load(Ordering::Relaxed);
         if same {
-            let sum = self
-                .spheres
-                .iter()
-                .zip(&self.bound)
-                .fold(Vec3::ZERO, |acc, (s, b)| {
-                    acc + (s.truncate() - b.truncate())
-                });
-            let drift = sum / n as f32;
-            for (k, (s, b)) in self.spheres.iter().zip(&self.bound).enumerate() {
-                if (s.truncate() - drift - b.truncate()).length() + s.w > b.w {
-                    self.stray[k] = true;
-                    self.strays.push(k as u32);
+            let drift = self.drift_since_bound(parallel);
+            let count = AtomicUsize::new(0);
+            let rows = (&mut self.stray[..], &self.spheres[..], &self.bound[..]);
+            crate::systems::run_rows(rows, parallel, |(stray, spheres, bound)| {
+                let mut strays = 0;
+                for ((stray, s), b) in stray.iter_mut().zip(spheres).zip(bound) {
+                    *stray = (s.truncate() - drift - b.truncate()).length() + s.w > b.w;
+                    strays += usize::from(*stray);
                 }
-            }
-            if self.strays.len() * STRAY_SHARE <= n {
+                if strays > 0 {
+                    count.fetch_add(strays, Ordering::Relaxed);
+                }
+            });
+            let count = count.into_inner();
+            if count * STRAY_SHARE <= n {
+                if count > 0 {
+                    let strays = (0u32..).zip(&self.stray).filter(|&(_, &s)| s);
+                    self.strays.extend(strays.map(|(k, _)| k));
+                }
                 self.drift = drift;
                 self.pair_strays();
                 return;
             }
-            self.strays.clear();
-            self.stray.fill(false);
         }
+        self.stray.fill(false);
         self.bound.clear();
         self.bound.extend(
             self.spheres
@@ -96,10 +151,84 @@ impl PairSolver {
         self.candidates.clear();
         let (candidates, grid, bound) = (&mut self.candidates, &self.grid, &self.bound);
         grid.pairs(bound, |i, j| candidates.push((i.min(j), i.max(j))));
-        self.entities.clear();
-        self.entities.extend_from_slice(&self.gathered);
         self.drift = Vec3::ZERO;
         self.skin_valid = true;
+    }
+
+    /// The bodies' mean displacement from their bounds: the sum of each block of
+    /// [`DRIFT_BLOCK`] bodies in order, then of the blocks' sums in order, so that it has
+    /// the same bits however the blocks are shared out.
+    fn drift_since_bound(&mut self, parallel: bool) -> Vec3 {
+        let n = self.spheres.len();
+        self.drift_sums.resize(n.div_ceil(DRIFT_BLOCK), Vec3::ZERO);
+        let rows = DriftBlocks {
+            sums: &mut self.drift_sums,
+            spheres: &self.spheres,
+            bound: &self.bound,
+        };
+        crate::systems::run_rows(rows, parallel, |blocks| {
+            let spheres = blocks.spheres.chunks(DRIFT_BLOCK);
+            let bound = blocks.bound.chunks(DRIFT_BLOCK);
+            for ((sum, spheres), bound) in blocks.sums.iter_mut().zip(spheres).zip(bound) {
+                *sum = spheres.iter().zip(bound).fold(Vec3::ZERO, |acc, (s, b)| {
+                    acc + (s.truncate() - b.truncate())
+                });
+            }
+        });
+        let sum = self.drift_sums.iter().fold(Vec3::ZERO, |acc, &s| acc + s);
+        sum / n as f32
+    }
+
+    /// Phase 2's choice of bodies, after [`PairSolver::cover_gathered`] found candidate
+    /// pairs: when the marbles in them are few (at most one in [`SELECT_SHARE`]), only
+    /// those, in the marbles' order ([`PairSolver::selected`]), so that a substep in
+    /// which a few marbles of a large scene meet costs what they do; every marble
+    /// otherwise. A marble's body index is then its place among the chosen: the same
+    /// relative order, so the stage does the same work in the same order either way.
+    pub fn select_bodies(&mut self) {
+        self.select_every_marble();
+        let n = self.spheres.len();
+        self.local.resize(n, NOT_A_BODY);
+        let most = n / SELECT_SHARE;
+        let pairs = candidate_pairs(
+            &self.candidates,
+            &self.extra,
+            &self.stray,
+            &self.strays,
+            None,
+        );
+        let mut few = true;
+        for (i, j) in pairs {
+            for m in [i, j] {
+                let mark = &mut self.local[m as usize];
+                if *mark == NOT_A_BODY {
+                    *mark = 0;
+                    self.selected.push(m);
+                }
+            }
+            if self.selected.len() > most {
+                few = false;
+                break;
+            }
+        }
+        if !few {
+            self.select_every_marble();
+            return;
+        }
+        self.selected.sort_unstable();
+        for (k, &m) in (0u32..).zip(&self.selected) {
+            self.local[m as usize] = k;
+        }
+        self.compact = true;
+    }
+
+    /// Makes every marble a body again (the body index is the marble's).
+    pub(super) fn select_every_marble(&mut self) {
+        for &m in &self.selected {
+            self.local[m as usize] = NOT_A_BODY;
+        }
+        self.selected.clear();
+        self.compact = false;
     }
 
     /// The candidate pairs of the strays of a [`PairSolver::cover`]: each stray against

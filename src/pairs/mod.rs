@@ -46,6 +46,7 @@
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use bevy_ecs::prelude::*;
 use glam::{IVec3, Mat4, Vec3, Vec4};
@@ -265,17 +266,24 @@ pub struct PairParams {
 ///
 /// | phase | contact stage (`PairContacts`) | impact stage (`PairImpacts`) |
 /// | --- | --- | --- |
-/// | 1. broad phase | [`begin`](Self::begin); per table of marbles [`push_contact_spheres`](Self::push_contact_spheres); [`cover_gathered`](Self::cover_gathered) (false: [`forget_contacts`](Self::forget_contacts), stop) | [`begin`](Self::begin); per table [`push_impact_spheres`](Self::push_impact_spheres); [`cover_gathered`](Self::cover_gathered) (false: stop) |
-/// | 2. bodies | [`clear_bodies`](Self::clear_bodies), per marble [`push_body_on_free_path`](Self::push_body_on_free_path) (at the substep's start), [`find_touching`](Self::find_touching) (false: stop) | [`clear_bodies`](Self::clear_bodies), per marble [`push_body`](Self::push_body) (start and end of the substep), [`find_impacts`](Self::find_impacts) (false: stop) |
-/// | 3. board contacts | [`begin_board_touches`](Self::begin_board_touches); per marble [`next_body_touches`](Self::next_body_touches) then, if [`in_rows`](Self::in_rows), its [`push_board_touch`](Self::push_board_touch)es; [`end_board_touches`](Self::end_board_touches) | the same, every marble |
+/// | 1. broad phase | [`begin`](Self::begin); per table of marbles [`gather_table`](Self::gather_table), its rows' [`contact_sphere`](Self::contact_sphere)s written with [`Gathered::write_with_paths`]; [`cover_gathered`](Self::cover_gathered) (false: [`forget_contacts`](Self::forget_contacts), stop) | [`begin`](Self::begin); per table [`gather_table`](Self::gather_table), its rows' [`impact_sphere`](Self::impact_sphere)s written with [`Gathered::write`]; [`cover_gathered`](Self::cover_gathered) (false: stop) |
+/// | 2. bodies | [`select_bodies`](Self::select_bodies), [`clear_bodies`](Self::clear_bodies), per marble [`selected`](Self::selected) [`push_body_on_free_path`](Self::push_body_on_free_path) (at the substep's start), [`find_touching`](Self::find_touching) (false: stop) | [`select_bodies`](Self::select_bodies), [`clear_bodies`](Self::clear_bodies), per marble selected [`push_body`](Self::push_body) (start and end of the substep), [`any_deep_impact`](Self::any_deep_impact) (false: stop); [`select_every_marble_for_impacts`](Self::select_every_marble_for_impacts) (true: the bodies again, every marble's), [`find_impacts`](Self::find_impacts) |
+/// | 3. board contacts | [`begin_board_touches`](Self::begin_board_touches); per body [`next_body_touches`](Self::next_body_touches) then, if [`in_rows`](Self::in_rows), its [`push_board_touch`](Self::push_board_touch)es; [`end_board_touches`](Self::end_board_touches) | the same, every marble |
 /// | 4. solve | [`solve_touching`](Self::solve_touching) | [`resolve_impacts`](Self::resolve_impacts) |
 ///
-/// Then [`changed_body`](Self::changed_body) gives each marble whose state the stage
-/// changed. Marbles are pushed in the same order in every phase.
+/// Then [`changed_body`](Self::changed_body) gives each body whose state the stage
+/// changed. Bodies are pushed in the marbles' order in every phase: every marble, or the
+/// marbles [`selected`](Self::selected).
 #[derive(Resource, Default, Debug)]
 pub struct PairSolver {
-    /// The marbles of the current substep.
+    /// The marbles of the current substep: every marble, or with `compact` those in
+    /// `selected` ([`PairSolver::select_bodies`]).
     bodies: Vec<Body>,
+    /// The marbles chosen as bodies (ascending), and each marble's body index among them
+    /// (`NOT_A_BODY` for the others), when `compact`.
+    selected: Vec<u32>,
+    local: Vec<u32>,
+    compact: bool,
     /// Their board contacts, grouped by body in body order.
     board_touches: Vec<BoardTouch>,
     /// Start of each body's board contacts in `board_touches` (one more entry than
@@ -287,20 +295,26 @@ pub struct PairSolver {
     grid: Grid,
     /// The candidates stand for these bodies (cleared when the bodies change).
     skin_valid: bool,
-    /// This substep's spheres (scratch of [`PairSolver::cover`]).
+    /// This substep's spheres (scratch of [`PairSolver::cover`]), kept at the number of
+    /// marbles: each table's rows write theirs in place ([`PairSolver::gather_table`]).
     spheres: Vec<Vec4>,
-    /// With the spheres: each body's radius and entity.
+    /// With the spheres: each body's radius.
     radii: Vec<f32>,
-    gathered: Vec<Entity>,
     /// The contact stage's free displacements, kept from the sphere gather for the bodies.
     paths: Vec<Vec3>,
+    /// Where the next table's rows go in the gathered columns.
+    gather_at: usize,
+    /// Set by the gather when a body's entity differs from the one in `entities`.
+    entities_changed: AtomicBool,
     /// Per body: outside its bound at the last cover, and the list of those.
     stray: Vec<bool>,
     strays: Vec<u32>,
     /// Candidate pairs of strays found at the last cover.
     extra: Vec<(u32, u32)>,
-    /// The marbles' common drift since the candidates were found, at the last cover.
+    /// The marbles' common drift since the candidates were found, at the last cover, and
+    /// the sums of its blocks of bodies ([`candidates::DRIFT_BLOCK`]).
     drift: Vec3,
+    drift_sums: Vec<Vec3>,
     /// A second grid (strays against each other; every marble after collisions).
     scratch_bound: Vec<Vec4>,
     scratch_grid: Grid,
@@ -322,7 +336,8 @@ pub struct PairSolver {
     /// own when there are many.
     late_bodies: Vec<u32>,
     candidates: Vec<(u32, u32)>,
-    /// The bodies' entities when the candidates were found.
+    /// The bodies' entities when the candidates were found; the gather overwrites those
+    /// that changed.
     entities: Vec<Entity>,
     late: Vec<Row>,
     adjacency_start: Vec<u32>,
@@ -365,14 +380,102 @@ pub struct PairSolver {
     cross_checked: [usize; 3],
 }
 
+/// One table's rows of the broad phase's gathered columns ([`PairSolver::gather_table`]).
+pub struct Gathered<'a> {
+    spheres: &'a mut [Vec4],
+    radii: &'a mut [f32],
+    paths: &'a mut [Vec3],
+    entities: &'a mut [Entity],
+    changed: &'a AtomicBool,
+}
+
+impl Gathered<'_> {
+    /// How many rows.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.spheres.len()
+    }
+
+    /// True when there are none.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.spheres.is_empty()
+    }
+
+    /// The first `mid` rows and the rest.
+    #[inline]
+    pub fn split_at(self, mid: usize) -> (Self, Self) {
+        let (s0, s1) = self.spheres.split_at_mut(mid);
+        let (r0, r1) = self.radii.split_at_mut(mid);
+        let (p0, p1) = self.paths.split_at_mut(mid);
+        let (e0, e1) = self.entities.split_at_mut(mid);
+        let head = Gathered {
+            spheres: s0,
+            radii: r0,
+            paths: p0,
+            entities: e0,
+            changed: self.changed,
+        };
+        let tail = Gathered {
+            spheres: s1,
+            radii: r1,
+            paths: p1,
+            entities: e1,
+            changed: self.changed,
+        };
+        (head, tail)
+    }
+
+    /// Writes the rows of the impact stage: their entities, and each row's sphere
+    /// (centre, radius) and radius. An entity that differs from the one the candidates
+    /// were found for is noted, and the candidates are then found afresh.
+    #[inline]
+    pub fn write(mut self, entities: &[Entity], rows: impl Iterator<Item = (Vec4, f32)>) {
+        self.note_entities(entities);
+        for ((s, r), (sphere, radius)) in
+            self.spheres.iter_mut().zip(self.radii.iter_mut()).zip(rows)
+        {
+            (*s, *r) = (sphere, radius);
+        }
+    }
+
+    /// [`Gathered::write`] for the contact stage, with each row's free displacement over
+    /// the substep, kept for its body.
+    #[inline]
+    pub fn write_with_paths(
+        mut self,
+        entities: &[Entity],
+        rows: impl Iterator<Item = (Vec4, f32, Vec3)>,
+    ) {
+        self.note_entities(entities);
+        let out = self
+            .spheres
+            .iter_mut()
+            .zip(self.radii.iter_mut())
+            .zip(self.paths.iter_mut());
+        for (((s, r), d), (sphere, radius, path)) in out.zip(rows) {
+            (*s, *r, *d) = (sphere, radius, path);
+        }
+    }
+
+    #[inline]
+    fn note_entities(&mut self, entities: &[Entity]) {
+        debug_assert_eq!(entities.len(), self.entities.len());
+        if self.entities != entities {
+            self.entities.copy_from_slice(entities);
+            self.changed.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
 impl PairSolver {
     /// Each stage starts with the broad phase on one sphere per marble, gathered before
-    /// the bodies are: [`PairSolver::begin`], then [`PairSolver::push_contact_spheres`] or
-    /// [`PairSolver::push_impact_spheres`] for every table of marbles, in the order their
-    /// bodies will have, then [`PairSolver::cover_gathered`]. A
-    /// substep in which no two marbles can meet (marbles spread over a board) ends there,
-    /// without building the bodies. `n` is the number of marbles; `out` (the stage's
-    /// records) is only sized.
+    /// the bodies are: [`PairSolver::begin`], then [`PairSolver::gather_table`] for every
+    /// table of marbles, in the order their bodies will have, each table's rows writing
+    /// their spheres there, then [`PairSolver::cover_gathered`]. A substep in which no
+    /// two marbles can meet (marbles spread over a board) ends there, without building
+    /// the bodies. `n` is the number of marbles; `out` (the stage's records) is only
+    /// sized.
     pub fn begin(&mut self, n: usize, out: &mut MarbleContacts) {
         if n > self.reserved_for {
             self.reserve(n);
@@ -381,65 +484,38 @@ impl PairSolver {
         if self.pile_reserved_for >= n && out.list.capacity() < 4 * n + 64 {
             out.list.reserve(4 * n + 64 - out.list.len());
         }
-        self.spheres.clear();
-        self.radii.clear();
-        self.gathered.clear();
-        self.paths.clear();
+        // The gathered columns keep their length while the number of marbles does: every
+        // row is overwritten, so a substep pays no clearing.
+        self.spheres.resize(n, Vec4::ZERO);
+        self.radii.resize(n, 0.0);
+        self.paths.resize(n, Vec3::ZERO);
+        let kept = self.entities.len() == n;
+        self.entities.resize(n, Entity::PLACEHOLDER);
+        self.entities_changed.store(!kept, Ordering::Relaxed);
+        self.gather_at = 0;
     }
 
-    /// Phase 1 of the contact stage, one table of marbles at a time (in the order their
-    /// bodies will have): the table's entities, centres and radii, and each marble's free
-    /// displacement over the substep (its integrator's displacement along the boards it
-    /// rests on), kept for its body; its sphere is the [`contact_sphere`](Self::contact_sphere).
-    /// Written with `extend` over the columns: a marble costs no capacity check or length
-    /// update per buffer.
-    #[inline]
-    pub fn push_contact_spheres(
-        &mut self,
-        p: &PairParams,
-        entities: &[Entity],
-        centres: impl Iterator<Item = Vec3>,
-        radii: impl Iterator<Item = f32> + Clone,
-        paths: impl Iterator<Item = Vec3>,
-    ) {
-        let from = self.paths.len();
-        self.paths.extend(paths);
-        let spheres = centres
-            .zip(&self.paths[from..])
-            .zip(radii.clone())
-            .map(|((x, &d), r)| Self::contact_sphere(p, x, d, r));
-        self.spheres.extend(spheres);
-        self.push_table(entities, radii);
-    }
-
-    /// Phase 1 of the impact stage, one table of marbles at a time (in the order their
-    /// bodies will have): the table's entities, centres at the substep's start and end,
-    /// and radii; each marble's sphere is the [`impact_sphere`](Self::impact_sphere).
-    #[inline]
-    pub fn push_impact_spheres(
-        &mut self,
-        p: &PairParams,
-        entities: &[Entity],
-        ends: impl Iterator<Item = (Vec3, Vec3)>,
-        radii: impl Iterator<Item = f32> + Clone,
-    ) {
-        let spheres = ends
-            .zip(radii.clone())
-            .map(|((x0, x), r)| Self::impact_sphere(p, x0, x, r));
-        self.spheres.extend(spheres);
-        self.push_table(entities, radii);
-    }
-
-    /// With a table's spheres: its marbles' radii and entities.
-    #[inline]
-    fn push_table(&mut self, entities: &[Entity], radii: impl Iterator<Item = f32>) {
-        self.radii.extend(radii);
-        self.gathered.extend_from_slice(entities);
+    /// Phase 1, one table of marbles at a time (in the order their bodies will have):
+    /// where the table's rows put their spheres, radii and (the contact stage) free
+    /// displacements, to be written by [`Gathered::write`] or
+    /// [`Gathered::write_with_paths`] over the rows in order or in chunks
+    /// ([`Gathered::split_at`]).
+    pub fn gather_table(&mut self, len: usize) -> Gathered<'_> {
+        let rows = self.gather_at..self.gather_at + len;
+        self.gather_at = rows.end;
+        Gathered {
+            spheres: &mut self.spheres[rows.clone()],
+            radii: &mut self.radii[rows.clone()],
+            paths: &mut self.paths[rows.clone()],
+            entities: &mut self.entities[rows],
+            changed: &self.entities_changed,
+        }
     }
 
     /// Phase 2: forgets the last substep's bodies.
     pub fn clear_bodies(&mut self) {
         let n = self.spheres.len();
+        debug_assert_eq!(self.gather_at, n, "every marble's sphere was gathered");
         if n > self.pile_reserved_for {
             self.reserve_pile(n);
         }
@@ -465,12 +541,40 @@ impl PairSolver {
         self.bodies.push(body);
     }
 
-    /// Phase 2 of the contact stage: the next marble, its [`Body::d`] the free path pushed
-    /// with its sphere ([`PairSolver::push_contact_spheres`]).
+    /// Phase 2 of the contact stage: the next marble, its [`Body::d`] the free path
+    /// gathered with its sphere ([`Gathered::write_with_paths`]).
     #[inline]
     pub fn push_body_on_free_path(&mut self, mut body: Body) {
-        body.d = self.paths[self.bodies.len()];
+        body.d = self.paths[self.marble_of(self.bodies.len())];
         self.bodies.push(body);
+    }
+
+    /// Phase 2: the marbles to push bodies for, in order, after
+    /// [`PairSolver::select_bodies`] (`None`: every marble).
+    #[inline]
+    pub fn selected(&self) -> Option<&[u32]> {
+        self.compact.then_some(self.selected.as_slice())
+    }
+
+    /// How many bodies phase 2 pushes: the marbles [`selected`](Self::selected), or every
+    /// marble.
+    #[inline]
+    pub fn chosen(&self) -> usize {
+        if self.compact {
+            self.selected.len()
+        } else {
+            self.spheres.len()
+        }
+    }
+
+    /// The index among all marbles of body `k`'s marble.
+    #[inline]
+    pub fn marble_of(&self, k: usize) -> usize {
+        if self.compact {
+            self.selected[k] as usize
+        } else {
+            k
+        }
     }
 
     /// Body `k`, as the stage left it.
@@ -519,9 +623,15 @@ impl PairSolver {
     }
 
     /// The broad phase on the gathered spheres (module docs, step 1); whether any two
-    /// marbles can meet.
-    pub fn cover_gathered(&mut self) -> bool {
-        self.cover_spheres();
+    /// marbles can meet. With `parallel` (and the `parallel` feature), its passes over
+    /// the marbles run in chunks on the task pool, with the same bits.
+    pub fn cover_gathered(&mut self, parallel: bool) -> bool {
+        debug_assert_eq!(
+            self.gather_at,
+            self.spheres.len(),
+            "every sphere was gathered"
+        );
+        self.cover_spheres(parallel);
         !(self.candidates.is_empty() && self.extra.is_empty())
     }
 
@@ -580,12 +690,20 @@ impl PairSolver {
     /// contacts.
     pub fn find_touching(&mut self, p: &PairParams) -> bool {
         let n = self.bodies.len();
-        debug_assert_eq!(n, self.spheres.len(), "the broad phase ran on these bodies");
+        self.check_bodies();
         self.changed.clear();
         self.changed.resize(n, false);
         // 2. The touching pairs, and the pairs that could close their gap this substep.
         self.rows.clear();
-        for (i, j) in candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays) {
+        let local = self.compact.then_some(self.local.as_slice());
+        let pairs = candidate_pairs(
+            &self.candidates,
+            &self.extra,
+            &self.stray,
+            &self.strays,
+            local,
+        );
+        for (i, j) in pairs {
             if let Some(row) = narrow(&self.bodies, i, j, p) {
                 if row.kind == Found::Start {
                     self.rows.push(row);
@@ -630,31 +748,60 @@ impl PairSolver {
         }
     }
 
-    /// The impact stage, after the marble–board response (module docs), on
-    /// the bodies with `x0`, `v0` at the substep's start and `x`, `v` at its
-    /// end: finds the pairs that met during the substep deeply enough to collide now, and
-    /// returns whether there are any; then [`PairSolver::resolve_impacts`] needs the board
+    /// The impact stage, after the marble–board response (module docs), on the bodies
+    /// (every marble, or those [`PairSolver::select_bodies`] chose) with `x0`, `v0` at the
+    /// substep's start and `x`, `v` at its end: whether any pair met during the substep
+    /// deeply enough to collide now. Then [`PairSolver::select_every_marble_for_impacts`]
+    /// and [`PairSolver::find_impacts`].
+    pub fn any_deep_impact(&mut self, p: &PairParams) -> bool {
+        self.check_bodies();
+        // Only the pairs that moved far enough apart from each other to leave a deep
+        // overlap ([`may_impact_deeply`]) go through the narrow phase; most substeps of a
+        // pile or of marbles rolling together have none and stop here.
+        let bodies = &self.bodies;
+        let slack = rounding_slack(bodies);
+        let local = self.compact.then_some(self.local.as_slice());
+        candidate_pairs(
+            &self.candidates,
+            &self.extra,
+            &self.stray,
+            &self.strays,
+            local,
+        )
+        .filter(|&(i, j)| may_impact_deeply(bodies, i, j, slack))
+        .any(|(i, j)| narrow(bodies, i, j, p).is_some_and(|row| deep_impact(bodies, &row)))
+    }
+
+    /// After [`PairSolver::any_deep_impact`] found one: the collisions that follow may
+    /// reach any marble, so every marble becomes a body. Returns whether the bodies were
+    /// a selection, to be gathered again (phase 2) before [`PairSolver::find_impacts`].
+    pub fn select_every_marble_for_impacts(&mut self) -> bool {
+        let compact = self.compact;
+        self.select_every_marble();
+        compact
+    }
+
+    /// The impact stage's rows, after [`PairSolver::any_deep_impact`] found a deep impact,
+    /// on every marble's body: the pairs that met during the substep (the deep impacts
+    /// and the shallow ones, which stay for the next substep's contact stage) and those
+    /// touching at the start. Then [`PairSolver::resolve_impacts`] needs the board
     /// contacts.
-    pub fn find_impacts(&mut self, p: &PairParams) -> bool {
+    pub fn find_impacts(&mut self, p: &PairParams) {
         let n = self.bodies.len();
-        debug_assert_eq!(n, self.spheres.len(), "the broad phase ran on these bodies");
+        debug_assert!(!self.compact);
+        self.check_bodies();
         self.changed.clear();
         self.changed.resize(n, false);
         self.rows.clear();
-        // The rows are needed only when some pair collides deeply: look for one first,
-        // with the narrow phase only for the pairs that moved far enough apart from each
-        // other to leave a deep overlap ([`may_impact_deeply`]); most substeps of a pile
-        // or of marbles rolling together have none and stop here.
-        let bodies = &self.bodies;
-        let slack = rounding_slack(bodies);
-        let deep = candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays)
-            .filter(|&(i, j)| may_impact_deeply(bodies, i, j, slack))
-            .any(|(i, j)| narrow(bodies, i, j, p).is_some_and(|row| deep_impact(bodies, &row)));
-        if !deep {
-            return false;
-        }
         let mut any = false;
-        for (i, j) in candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays) {
+        let pairs = candidate_pairs(
+            &self.candidates,
+            &self.extra,
+            &self.stray,
+            &self.strays,
+            None,
+        );
+        for (i, j) in pairs {
             if let Some(mut row) = narrow(&self.bodies, i, j, p) {
                 if row.kind == Found::Impact {
                     if shallow(&self.bodies, &row) {
@@ -672,8 +819,16 @@ impl PairSolver {
                 }
             }
         }
-        debug_assert!(any, "the search above found a deep impact");
-        any
+        debug_assert!(any, "the search before found a deep impact");
+    }
+
+    /// Debug builds: the bodies are the marbles the broad phase chose.
+    fn check_bodies(&self) {
+        debug_assert_eq!(
+            self.bodies.len(),
+            self.chosen(),
+            "a body for every marble chosen"
+        );
     }
 
     /// The rest of the impact stage, after [`PairSolver::find_impacts`] found impacts,
@@ -733,10 +888,12 @@ impl PairSolver {
         self.spheres.reserve(n);
         self.stray.reserve(n);
         self.radii.reserve(n);
-        self.gathered.reserve(n);
         self.paths.reserve(n);
+        self.drift_sums.reserve(n.div_ceil(candidates::DRIFT_BLOCK));
         self.strays.reserve(n);
         self.entities.reserve(n);
+        self.local.reserve(n);
+        self.selected.reserve(n / candidates::SELECT_SHARE + 2);
         self.grid.reserve(n);
         self.reserved_for = n;
     }
