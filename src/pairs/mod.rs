@@ -378,6 +378,15 @@ pub struct PairSolver {
     cross_check_late: bool,
     #[cfg(test)]
     cross_checked: [usize; 3],
+    /// Test only: never select bodies ([`PairSolver::select_bodies`]), and count the
+    /// substeps that did.
+    #[cfg(test)]
+    never_select: bool,
+    #[cfg(test)]
+    selections: usize,
+    /// Test only: impact stages that found a deep impact among selected bodies.
+    #[cfg(test)]
+    widened: usize,
 }
 
 /// One table's rows of the broad phase's gathered columns ([`PairSolver::gather_table`]).
@@ -777,6 +786,10 @@ impl PairSolver {
     /// a selection, to be gathered again (phase 2) before [`PairSolver::find_impacts`].
     pub fn select_every_marble_for_impacts(&mut self) -> bool {
         let compact = self.compact;
+        #[cfg(test)]
+        {
+            self.widened += usize::from(compact);
+        }
         self.select_every_marble();
         compact
     }

@@ -307,3 +307,66 @@ fn kept_candidates_cover_every_overlapping_pair() {
         "kept {kept}, with strays {with_strays}"
     );
 }
+
+/// Bodies for only the marbles of the candidate pairs ([`PairSolver::select_bodies`]) give
+/// the bits of bodies for every marble: the walled board with collisions, its marbles
+/// sliding into the lower wall's row, and every tenth marble of one row sent fast into its
+/// neighbour (deep impacts, after which the impact stage takes every marble), stepped both
+/// ways; every marble's position and velocity bits and every recorded contact agree.
+#[test]
+fn selected_bodies_give_the_bits_of_every_marble() {
+    let run = |never_select: bool| {
+        let mut scene = crate::scenes::walled_board(2500);
+        scene.marble_collisions = true;
+        for m in scene.marbles.iter_mut().skip(1200).step_by(10).take(5) {
+            m.velocity = [1.5, 0.0, 0.0];
+        }
+        let mut sim = crate::simulation::Simulation::from_scene(&scene).unwrap();
+        sim.world_mut().resource_mut::<PairSolver>().never_select = never_select;
+        let mut contacts = Vec::new();
+        for _ in 0..90 {
+            sim.step();
+            let recorded = sim.world().resource::<MarbleContacts>();
+            contacts.extend(recorded.as_slice().iter().map(|c| {
+                (
+                    c.a,
+                    c.b,
+                    c.normal.to_array().map(f32::to_bits),
+                    c.depth.to_bits(),
+                    c.kind,
+                )
+            }));
+        }
+        let state: Vec<[u32; 6]> = (0..sim.marbles().len())
+            .map(|i| {
+                let (x, v) = sim.marble_state(i);
+                let mut bits = [0; 6];
+                for (b, f) in bits
+                    .iter_mut()
+                    .zip(x.to_array().into_iter().chain(v.to_array()))
+                {
+                    *b = f.to_bits();
+                }
+                bits
+            })
+            .collect();
+        let solver = sim.world().resource::<PairSolver>();
+        (state, contacts, solver.selections, solver.widened)
+    };
+    let (selected, selected_contacts, selections, widened) = run(false);
+    let (every, every_contacts, none, _) = run(true);
+    assert_eq!(none, 0);
+    assert!(
+        selections > 20 && widened > 0,
+        "bodies selected in {selections} stages, every marble taken after a deep impact \
+         among them in {widened}"
+    );
+    assert!(
+        selected_contacts
+            .iter()
+            .any(|c| c.4 == ContactKind::Collision),
+        "some marbles collide"
+    );
+    assert_eq!(selected_contacts, every_contacts, "the same contacts");
+    assert_eq!(selected, every, "the same positions and velocities");
+}
