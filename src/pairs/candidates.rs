@@ -180,7 +180,7 @@ impl PairSolver {
     }
 
     /// Phase 2's choice of bodies, after [`PairSolver::cover_gathered`] found candidate
-    /// pairs: when the marbles in them are few (at most one in [`SELECT_SHARE`]), only
+    /// pairs: when the marbles in them are few (at most one in eight), only
     /// those, in the marbles' order ([`PairSolver::selected`]), so that a substep in
     /// which a few marbles of a large scene meet costs what they do; every marble
     /// otherwise. A marble's body index is then its place among the chosen: the same
