@@ -1,5 +1,8 @@
 //! Force accumulation and the end-of-step housekeeping.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use bevy_ecs::change_detection::ContiguousMut;
 use bevy_ecs::prelude::*;
 
 use crate::components::{Acceleration, Force, Marble, Mass, Quarantined};
@@ -17,15 +20,19 @@ pub fn accumulate_forces(
     >,
 ) {
     let g = tilt.map_or(config.gravity, |t| t.gravity(config.gravity));
+    let parallel = super::on_pool(marbles.iter().len());
     // Table by table, over the columns as slices: the accelerations' change ticks are set
-    // in one pass, not one write per marble.
+    // in one pass, not one write per marble; with `parallel`, in chunks on the task pool.
     let tables = marbles
         .contiguous_iter_mut()
         .expect("a marble's components are stored in tables");
-    for (force, mass, mut acceleration) in tables {
-        for ((f, m), a) in force.iter().zip(mass).zip(acceleration.iter_mut()) {
-            a.0 = g + f.0 * m.inverse();
-        }
+    for (force, mass, acceleration) in tables {
+        let rows = (force, mass, ContiguousMut::split(acceleration).0);
+        super::run_rows(rows, parallel, |(force, mass, acceleration)| {
+            for ((f, m), a) in force.iter().zip(mass).zip(acceleration) {
+                a.0 = g + f.0 * m.inverse();
+            }
+        });
     }
 }
 
@@ -39,16 +46,22 @@ pub fn clear_forces(mut forces: Query<&mut Force, (With<Marble>, Without<Sleepin
     // Most scenes apply no force: the columns are read as slices first (the bits of each
     // component, less its sign, or-ed: zero only when every force is ±0), and only a marble
     // whose force is not zero is written (its change tick set).
-    let any = forces
+    let parallel = super::on_pool(forces.iter().len());
+    let any = AtomicBool::new(false);
+    let tables = forces
         .contiguous_iter()
-        .expect("a marble's components are stored in tables")
-        .any(|f| {
+        .expect("a marble's components are stored in tables");
+    for f in tables {
+        super::run_rows(f, parallel, |f| {
             let bits = f.iter().fold(0u32, |bits, f| {
                 bits | f.0.x.to_bits() | f.0.y.to_bits() | f.0.z.to_bits()
             });
-            bits << 1 != 0
+            if bits << 1 != 0 {
+                any.store(true, Ordering::Relaxed);
+            }
         });
-    if !any {
+    }
+    if !any.into_inner() {
         return;
     }
     for mut force in &mut forces {

@@ -1,5 +1,7 @@
 //! Bad values quarantined before the step uses them ([`crate::validate`]).
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use bevy_ecs::prelude::*;
 use glam::Vec3;
 
@@ -90,6 +92,8 @@ pub fn validate(
     // The common case in one pass of integer comparisons on the values' bits over each
     // table's columns (which the compiler vectorizes); only a table holding a marble that
     // fails is looked at again, for that marble's first bad value.
+    // With `parallel`, that pass in chunks on the task pool.
+    let parallel = super::on_pool(awake.iter().len());
     let tables = awake
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
@@ -100,18 +104,37 @@ pub fn validate(
                 (&radius[i], &mass[i], &restitution[i], &friction[i]),
             )
         };
-        let all = position
-            .iter()
-            .zip(velocity)
-            .zip(force)
-            .zip(radius)
-            .zip(mass)
-            .zip(restitution)
-            .zip(friction)
-            .fold(true, |all, ((((((x, v), f), r), m), e), mu)| {
-                all & marble_ok((x, v, f), (r, m, e, mu))
-            });
-        if all {
+        let bad = AtomicBool::new(false);
+        let rows = (
+            position,
+            velocity,
+            force,
+            radius,
+            mass,
+            restitution,
+            friction,
+        );
+        super::run_rows(
+            rows,
+            parallel,
+            |(position, velocity, force, radius, mass, e, mu)| {
+                let all = position
+                    .iter()
+                    .zip(velocity)
+                    .zip(force)
+                    .zip(radius)
+                    .zip(mass)
+                    .zip(e)
+                    .zip(mu)
+                    .fold(true, |all, ((((((x, v), f), r), m), e), mu)| {
+                        all & marble_ok((x, v, f), (r, m, e, mu))
+                    });
+                if !all {
+                    bad.store(true, Ordering::Relaxed);
+                }
+            },
+        );
+        if !bad.into_inner() {
             continue;
         }
         for (i, &entity) in entities.iter().enumerate() {
