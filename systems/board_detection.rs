@@ -145,9 +145,9 @@ impl<'a> Stage<'a> {
         self.flagged.store(true, Ordering::Relaxed);
     }
 
-    /// [`Stage::detect`] for a marble's staged components, handed over one by one (always
-    /// inlined: passing the whole item costs a copy of it per marble), its contacts built
-    /// in `list` and stored.
+    /// [`Stage::detect`] for the staged components of a marble that carries a spin, handed
+    /// over one by one (always inlined: passing the whole item costs a copy of it per
+    /// marble), its contacts built in `list` and stored.
     #[inline(always)]
     fn detect_staged(
         &self,
@@ -164,7 +164,7 @@ impl<'a> Stage<'a> {
             spin.map(Mut::into_inner),
         );
         let (mut contacts, mut more, mut near) = (m.contacts, m.more, m.near);
-        self.detect(
+        self.detect::<true>(
             touches,
             motion,
             m.start,
@@ -198,7 +198,7 @@ impl<'a> Stage<'a> {
             .zip(t.more.iter_mut())
             .zip(t.near.iter_mut());
         for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
-            self.detect(
+            self.detect::<false>(
                 &mut touches,
                 (x, carry, v, None),
                 start,
@@ -242,13 +242,16 @@ impl<'a> Stage<'a> {
     }
 
     /// One marble's detection (see [`detect_board_contacts`]): its motion state (with its
-    /// spin when it carries one), `material` its side of its contacts.
+    /// spin when it carries one: `SPIN`), `material` its side of its contacts. A copy for
+    /// the marbles that do not spin (`SPIN` false) leaves every spin branch out, whether or
+    /// not the compiler inlines it into their loop (called, the copy with those branches
+    /// cost the walled board a tenth more instructions).
     #[expect(
         clippy::too_many_arguments,
         reason = "a marble's components, handed over one by one"
     )]
     #[inline]
-    fn detect(
+    fn detect<const SPIN: bool>(
         &self,
         touches: &mut TouchList,
         (position, carry, velocity, spin): MarbleState<'_>,
@@ -268,7 +271,11 @@ impl<'a> Stage<'a> {
         }
         let tol = touch_tolerance(config.contact_tolerance, r, start.position);
         // The spin, when the marble spins (rolling on and an angular velocity).
-        let w0 = spin.as_ref().filter(|_| config.rolling).map(|w| w.0);
+        let w0 = if SPIN {
+            spin.as_ref().filter(|_| config.rolling).map(|w| w.0)
+        } else {
+            None
+        };
         // The commonest case of all, a marble that does not spin resting or sliding on a
         // still flat face with nothing else near, when its list vouches for that as it
         // stands (after a rebuild, `lone_touch` finds it).
@@ -371,7 +378,7 @@ impl<'a> Stage<'a> {
                 (position.0, carry.0) =
                     compensated_add(config.compensated, start.position, start.carry, out.d);
                 velocity.0 = out.v;
-                if let Some(spin) = spin.filter(|_| config.rolling) {
+                if SPIN && let Some(spin) = spin.filter(|_| config.rolling) {
                     spin.0 = out.w;
                 }
                 return;
