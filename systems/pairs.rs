@@ -272,28 +272,45 @@ pub fn pair_contacts(
     // the same table order).
     solver.select_bodies();
     solver.clear_bodies();
-    let body = |t: &PairContactStagedReadOnlyContiguousItem<'_, '_>, i: usize| Body {
-        entity: t.entity[i],
-        x: t.position[i].0,
-        x0: t.position[i].0,
-        v: t.velocity[i].0,
-        v0: t.velocity[i].0,
-        w: t.mass[i].inverse(),
-        r: t.radius[i].0,
-        e: t.restitution[i].0,
-        a: t.acceleration[i].0,
-        d: Vec3::ZERO,
-        omega: t.spin.map_or(Vec3::ZERO, |w| w[i].0),
-        spins: config.rolling && t.spin.is_some(),
-        mu: t.friction.map_or(0.0, |f| f[i].0),
-    };
+    let body = |row, spin, mu| contact_body(row, spin, mu, config.rolling);
     let tables = marbles
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
-    let mut rows = TableRows::new(tables, |t| t.entity.len());
-    for k in 0..solver.chosen() {
-        let (t, i) = rows.seek(solver.marble_of(k));
-        solver.push_body_on_free_path(body(t, i));
+    if solver.selected().is_some() {
+        let mut rows = TableRows::new(tables, |t| t.entity.len());
+        for k in 0..solver.chosen() {
+            let (t, i) = rows.seek(solver.marble_of(k));
+            let row = (
+                &t.entity[i],
+                &t.position[i],
+                &t.velocity[i],
+                &t.mass[i],
+                &t.radius[i],
+                &t.restitution[i],
+                &t.acceleration[i],
+            );
+            let spin = t.spin.map(|w| w[i].0);
+            let mu = t.friction.map_or(0.0, |f| f[i].0);
+            solver.push_body_on_free_path(body(row, spin, mu));
+        }
+    } else {
+        // Every marble: the columns zipped, with no index checked per column.
+        for t in tables {
+            let rows = t
+                .entity
+                .iter()
+                .zip(t.position)
+                .zip(t.velocity)
+                .zip(t.mass)
+                .zip(t.radius)
+                .zip(t.restitution)
+                .zip(t.acceleration);
+            for (i, ((((((entity, x), v), mass), r), e), a)) in rows.enumerate() {
+                let spin = t.spin.map(|w| w[i].0);
+                let mu = t.friction.map_or(0.0, |f| f[i].0);
+                solver.push_body_on_free_path(body((entity, x, v, mass, r, e, a), spin, mu));
+            }
+        }
     }
     if !solver.find_touching(&params) {
         return;
@@ -438,21 +455,6 @@ pub fn pair_impacts(
     // impact; once one is found every marble, since what follows may reach any.
     solver.select_bodies();
     solver.clear_bodies();
-    let body = |t: &PairImpactStagedReadOnlyContiguousItem<'_, '_>, i: usize| Body {
-        entity: t.entity[i],
-        x: t.position[i].0,
-        x0: t.start[i].position,
-        v: t.velocity[i].0,
-        v0: t.start[i].velocity,
-        w: t.mass[i].inverse(),
-        r: t.radius[i].0,
-        e: t.restitution[i].0,
-        a: Vec3::ZERO,
-        d: Vec3::ZERO,
-        omega: Vec3::ZERO,
-        spins: false,
-        mu: 0.0,
-    };
     if solver.selected().is_some() {
         let tables = marbles
             .contiguous_iter()
@@ -460,17 +462,26 @@ pub fn pair_impacts(
         let mut rows = TableRows::new(tables, |t| t.entity.len());
         for k in 0..solver.chosen() {
             let (t, i) = rows.seek(solver.marble_of(k));
-            solver.push_body(body(t, i));
+            let row = (
+                &t.entity[i],
+                &t.position[i],
+                &t.start[i],
+                &t.velocity[i],
+                &t.mass[i],
+                &t.radius[i],
+                &t.restitution[i],
+            );
+            solver.push_body(impact_body(row));
         }
     } else {
-        push_every_body(solver, &marbles, body);
+        push_every_body(solver, &marbles);
     }
     if !solver.any_deep_impact(&params) {
         return;
     }
     if solver.select_every_marble_for_impacts() {
         solver.clear_bodies();
-        push_every_body(solver, &marbles, body);
+        push_every_body(solver, &marbles);
     }
     solver.find_impacts(&params);
     // 3. Every marble's board contacts of this substep; where it would have got without
@@ -517,18 +528,94 @@ pub fn pair_impacts(
     }
 }
 
-/// Phase 2 of the impact stage for every marble, in order, table by table.
-fn push_every_body(
-    solver: &mut PairSolver,
-    marbles: &Query<PairImpactStaged, Stepped>,
-    body: impl Fn(&PairImpactStagedReadOnlyContiguousItem<'_, '_>, usize) -> Body,
-) {
+/// One marble's columns that make its body in the contact stage: entity, position,
+/// velocity, mass, radius, restitution, acceleration.
+type ContactBodyRow<'a> = (
+    &'a Entity,
+    &'a Position,
+    &'a Velocity,
+    &'a Mass,
+    &'a Radius,
+    &'a Restitution,
+    &'a Acceleration,
+);
+
+/// A marble's body in the contact stage, from its row's columns, and its spin and
+/// friction when it has them (`rolling`: spin and friction are on).
+#[inline(always)]
+fn contact_body(
+    (&entity, x, v, mass, r, e, a): ContactBodyRow<'_>,
+    spin: Option<Vec3>,
+    mu: f32,
+    rolling: bool,
+) -> Body {
+    Body {
+        entity,
+        x: x.0,
+        x0: x.0,
+        v: v.0,
+        v0: v.0,
+        w: mass.inverse(),
+        r: r.0,
+        e: e.0,
+        a: a.0,
+        d: Vec3::ZERO,
+        omega: spin.unwrap_or(Vec3::ZERO),
+        spins: rolling && spin.is_some(),
+        mu,
+    }
+}
+
+/// One marble's columns that make its body in the impact stage: entity, position, the
+/// substep's start, velocity, mass, radius, restitution.
+type ImpactBodyRow<'a> = (
+    &'a Entity,
+    &'a Position,
+    &'a StepStart,
+    &'a Velocity,
+    &'a Mass,
+    &'a Radius,
+    &'a Restitution,
+);
+
+/// A marble's body in the impact stage: where it started the substep and where it ended.
+#[inline(always)]
+fn impact_body((&entity, x, start, v, mass, r, e): ImpactBodyRow<'_>) -> Body {
+    Body {
+        entity,
+        x: x.0,
+        x0: start.position,
+        v: v.0,
+        v0: start.velocity,
+        w: mass.inverse(),
+        r: r.0,
+        e: e.0,
+        a: Vec3::ZERO,
+        d: Vec3::ZERO,
+        omega: Vec3::ZERO,
+        spins: false,
+        mu: 0.0,
+    }
+}
+
+/// Phase 2 of the impact stage for every marble, in order, table by table: the columns
+/// zipped, with no index checked per column.
+fn push_every_body(solver: &mut PairSolver, marbles: &Query<PairImpactStaged, Stepped>) {
     let tables = marbles
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
     for t in tables {
-        for i in 0..t.entity.len() {
-            solver.push_body(body(&t, i));
+        let rows = t
+            .entity
+            .iter()
+            .zip(t.position)
+            .zip(t.start)
+            .zip(t.velocity)
+            .zip(t.mass)
+            .zip(t.radius)
+            .zip(t.restitution);
+        for ((((((entity, x), start), v), mass), r), e) in rows {
+            solver.push_body(impact_body((entity, x, start, v, mass, r, e)));
         }
     }
 }

@@ -52,24 +52,39 @@ impl crate::systems::Rows for DriftBlocks<'_> {
 }
 
 /// The candidate pairs of the last [`PairSolver::cover`]: the standing candidates of
-/// marbles that stayed inside their bounds, and the strays' pairs; with `local`, in the
-/// bodies' indices of a selection ([`PairSolver::select_bodies`]).
+/// marbles that stayed inside their bounds, and the strays' pairs.
 pub(super) fn candidate_pairs<'a>(
     candidates: &'a [(u32, u32)],
     extra: &'a [(u32, u32)],
     stray: &'a [bool],
     strays: &[u32],
-    local: Option<&'a [u32]>,
 ) -> impl Iterator<Item = (u32, u32)> + 'a {
     let any = !strays.is_empty();
     candidates
         .iter()
         .filter(move |&&(i, j)| !(any && (stray[i as usize] || stray[j as usize])))
         .chain(extra)
-        .map(move |&(i, j)| match local {
-            Some(local) => (local[i as usize], local[j as usize]),
-            None => (i, j),
-        })
+        .copied()
+}
+
+/// Calls `each` with every candidate pair ([`candidate_pairs`]) in the bodies' indices: with
+/// `local` (a selection, [`PairSolver::select_bodies`]), each marble's index among the
+/// bodies.
+#[inline]
+pub(super) fn for_body_pairs(
+    candidates: &[(u32, u32)],
+    extra: &[(u32, u32)],
+    (stray, strays): (&[bool], &[u32]),
+    local: Option<&[u32]>,
+    each: impl FnMut((u32, u32)),
+) {
+    let pairs = candidate_pairs(candidates, extra, stray, strays);
+    match local {
+        Some(local) => pairs
+            .map(|(i, j)| (local[i as usize], local[j as usize]))
+            .for_each(each),
+        None => pairs.for_each(each),
+    }
 }
 
 /// The bodies are the marbles of the candidate pairs, not every marble, when those are
@@ -190,13 +205,7 @@ impl PairSolver {
         let n = self.spheres.len();
         self.local.resize(n, NOT_A_BODY);
         let most = n / SELECT_SHARE;
-        let pairs = candidate_pairs(
-            &self.candidates,
-            &self.extra,
-            &self.stray,
-            &self.strays,
-            None,
-        );
+        let pairs = candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays);
         #[cfg(test)]
         if self.never_select {
             return;

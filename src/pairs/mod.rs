@@ -66,7 +66,7 @@ mod project;
 mod rows;
 mod solve;
 
-use candidates::candidate_pairs;
+use candidates::{candidate_pairs, for_body_pairs};
 pub(crate) use grid::{Grid, KeyMap};
 use narrow::{
     deep_impact, late_row, late_touch, may_impact_deeply, narrow, near_row, rounding_slack, shallow,
@@ -705,22 +705,17 @@ impl PairSolver {
         // 2. The touching pairs, and the pairs that could close their gap this substep.
         self.rows.clear();
         let local = self.compact.then_some(self.local.as_slice());
-        let pairs = candidate_pairs(
-            &self.candidates,
-            &self.extra,
-            &self.stray,
-            &self.strays,
-            local,
-        );
-        for (i, j) in pairs {
-            if let Some(row) = narrow(&self.bodies, i, j, p) {
+        let (bodies, rows) = (&self.bodies, &mut self.rows);
+        let strays = (self.stray.as_slice(), self.strays.as_slice());
+        for_body_pairs(&self.candidates, &self.extra, strays, local, |(i, j)| {
+            if let Some(row) = narrow(bodies, i, j, p) {
                 if row.kind == Found::Start {
-                    self.rows.push(row);
+                    rows.push(row);
                 }
-            } else if let Some(row) = near_row(&self.bodies, i, j, p) {
-                self.rows.push(row);
+            } else if let Some(row) = near_row(bodies, i, j, p) {
+                rows.push(row);
             }
-        }
+        });
         if self.rows.is_empty() {
             self.warm.clear();
             return false;
@@ -769,16 +764,19 @@ impl PairSolver {
         // pile or of marbles rolling together have none and stop here.
         let bodies = &self.bodies;
         let slack = rounding_slack(bodies);
-        let local = self.compact.then_some(self.local.as_slice());
-        candidate_pairs(
-            &self.candidates,
-            &self.extra,
-            &self.stray,
-            &self.strays,
-            local,
-        )
-        .filter(|&(i, j)| may_impact_deeply(bodies, i, j, slack))
-        .any(|(i, j)| narrow(bodies, i, j, p).is_some_and(|row| deep_impact(bodies, &row)))
+        let deep = |(i, j): (u32, u32)| {
+            may_impact_deeply(bodies, i, j, slack)
+                && narrow(bodies, i, j, p).is_some_and(|row| deep_impact(bodies, &row))
+        };
+        let mut pairs = candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays);
+        if self.compact {
+            let local = &self.local;
+            pairs
+                .map(|(i, j)| (local[i as usize], local[j as usize]))
+                .any(deep)
+        } else {
+            pairs.any(deep)
+        }
     }
 
     /// After [`PairSolver::any_deep_impact`] found one: the collisions that follow may
@@ -807,13 +805,7 @@ impl PairSolver {
         self.changed.resize(n, false);
         self.rows.clear();
         let mut any = false;
-        let pairs = candidate_pairs(
-            &self.candidates,
-            &self.extra,
-            &self.stray,
-            &self.strays,
-            None,
-        );
+        let pairs = candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays);
         for (i, j) in pairs {
             if let Some(mut row) = narrow(&self.bodies, i, j, p) {
                 if row.kind == Found::Impact {

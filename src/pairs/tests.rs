@@ -278,7 +278,6 @@ fn kept_candidates_cover_every_overlapping_pair() {
             &solver.extra,
             &solver.stray,
             &solver.strays,
-            None,
         )
         .collect();
         let mut overlapping = Vec::new();
