@@ -91,7 +91,8 @@ fn rolling(c: &mut Criterion) {
 }
 
 /// The three bench scenes with marble–marble collisions on ([`scenes::BenchScene`]): (a)
-/// the walled board (marbles never touch each other, so this is the broad phase's cost),
+/// the walled board (spread marbles, mostly the broad phase's cost; only the rows that
+/// reach its lower wall meet, late in each 60-step run),
 /// (b) marbles poured into a box (dense contact; the scene runs 8 substeps per 1/60 s
 /// step) and (c) the labyrinth scaled to N; and (b) at the fewest substeps that meet the
 /// pile bar ([`scenes::POUR_BOX_BAR_SUBSTEPS`], id `pour_box_bar`). Throughput is

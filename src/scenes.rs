@@ -215,7 +215,8 @@ pub const POUR_BOX_BAR_SUBSTEPS: u32 = 3;
 /// comparison and `marble scene --bench`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BenchScene {
-    /// (a) [`walled_board`]: marbles on a tilted walled board, never touching each other.
+    /// (a) [`walled_board`]: marbles spread over a tilted walled board, which meet only
+    /// where they slide into its lower wall.
     WalledBoard,
     /// (b) [`pour_box`]: marbles poured into a walled box (dense contact).
     PourBox,
@@ -256,7 +257,10 @@ impl BenchScene {
 }
 
 /// Bench scene (a): `n` marbles resting in a square grid on a walled board tilted by
-/// 1°, spaced four radii apart so that they never touch each other while the bench runs.
+/// 1°, spaced four radii apart. They slide down the tilt together; with marble collisions
+/// on, the rows that reach the lower wall meet it and each other from the 47th step of
+/// the first second on (at most 64 touching pairs at 1,000 marbles, 200 at 10,000, in
+/// the first 60 steps).
 pub fn walled_board(n: usize) -> Scene {
     let r = crate::components::DEFAULT_RADIUS;
     let spacing = 4.0 * r;
