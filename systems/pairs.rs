@@ -272,14 +272,11 @@ pub fn pair_contacts(
     // the same table order).
     solver.select_bodies();
     solver.clear_bodies();
-    let body = |row, spin, mu| contact_body(row, spin, mu, config.rolling);
     let tables = marbles
         .contiguous_iter()
         .expect("a marble's components are stored in tables");
     if solver.selected().is_some() {
-        let mut rows = TableRows::new(tables, |t| t.entity.len());
-        for k in 0..solver.chosen() {
-            let (t, i) = rows.seek(solver.marble_of(k));
+        let at = |t: &PairContactStagedReadOnlyContiguousItem<'_, '_>, i: usize| {
             let row = (
                 &t.entity[i],
                 &t.position[i],
@@ -291,8 +288,15 @@ pub fn pair_contacts(
             );
             let spin = t.spin.map(|w| w[i].0);
             let mu = t.friction.map_or(0.0, |f| f[i].0);
-            solver.push_body_on_free_path(body(row, spin, mu));
-        }
+            contact_body(row, spin, mu, config.rolling)
+        };
+        push_selected(
+            solver,
+            tables,
+            |t| t.entity.len(),
+            at,
+            PairSolver::push_body_on_free_path,
+        );
     } else {
         // Every marble: the columns zipped, with no index checked per column.
         for t in tables {
@@ -308,7 +312,8 @@ pub fn pair_contacts(
             for (i, ((((((entity, x), v), mass), r), e), a)) in rows.enumerate() {
                 let spin = t.spin.map(|w| w[i].0);
                 let mu = t.friction.map_or(0.0, |f| f[i].0);
-                solver.push_body_on_free_path(body((entity, x, v, mass, r, e, a), spin, mu));
+                let row = (entity, x, v, mass, r, e, a);
+                solver.push_body_on_free_path(contact_body(row, spin, mu, config.rolling));
             }
         }
     }
@@ -376,6 +381,23 @@ pub fn pair_contacts(
                 write(body, &mut m);
             }
         }
+    }
+}
+
+/// Phase 2 for the marbles [`PairSolver::selected`], in order: `push` the body
+/// `body(table, row)` of each, its table and row found among `tables` (`len_of`: a
+/// table's number of rows).
+fn push_selected<T>(
+    solver: &mut PairSolver,
+    tables: impl Iterator<Item = T>,
+    len_of: impl Fn(&T) -> usize,
+    body: impl Fn(&T, usize) -> Body,
+    push: fn(&mut PairSolver, Body),
+) {
+    let mut rows = TableRows::new(tables, len_of);
+    for k in 0..solver.chosen() {
+        let (t, i) = rows.seek(solver.marble_of(k));
+        push(solver, body(t, i));
     }
 }
 
@@ -459,10 +481,8 @@ pub fn pair_impacts(
         let tables = marbles
             .contiguous_iter()
             .expect("a marble's components are stored in tables");
-        let mut rows = TableRows::new(tables, |t| t.entity.len());
-        for k in 0..solver.chosen() {
-            let (t, i) = rows.seek(solver.marble_of(k));
-            let row = (
+        let at = |t: &PairImpactStagedReadOnlyContiguousItem<'_, '_>, i: usize| {
+            impact_body((
                 &t.entity[i],
                 &t.position[i],
                 &t.start[i],
@@ -470,9 +490,15 @@ pub fn pair_impacts(
                 &t.mass[i],
                 &t.radius[i],
                 &t.restitution[i],
-            );
-            solver.push_body(impact_body(row));
-        }
+            ))
+        };
+        push_selected(
+            solver,
+            tables,
+            |t| t.entity.len(),
+            at,
+            PairSolver::push_body,
+        );
     } else {
         push_every_body(solver, &marbles);
     }
