@@ -249,10 +249,7 @@ pub(crate) fn run_rows<R: Rows>(rows: R, parallel: bool, each: impl Fn(R) + Sync
     #[cfg(feature = "parallel")]
     if parallel {
         let pool = bevy_tasks::ComputeTaskPool::get();
-        let chunk = rows
-            .len()
-            .div_ceil(4 * pool.thread_num().max(1))
-            .max(R::MIN_CHUNK);
+        let chunk = chunk_len(rows.len(), R::MIN_CHUNK);
         let each = &each;
         pool.scope(|scope| {
             let mut rows = rows;
@@ -266,6 +263,30 @@ pub(crate) fn run_rows<R: Rows>(rows: R, parallel: bool, each: impl Fn(R) + Sync
         return;
     }
     each(rows);
+}
+
+/// The rows of each chunk [`run_rows`] hands the task pool, for `len` rows and chunks of
+/// at least `min_chunk`: four chunks a pool thread.
+#[cfg(feature = "parallel")]
+#[inline]
+fn chunk_len(len: usize, min_chunk: usize) -> usize {
+    let threads = bevy_tasks::ComputeTaskPool::get().thread_num().max(1);
+    len.div_ceil(4 * threads).max(min_chunk)
+}
+
+/// How many chunks [`run_rows`] cuts `len` rows of `R` into with `parallel`: one when it
+/// runs them in order.
+#[cfg_attr(
+    not(feature = "parallel"),
+    expect(unused_variables, reason = "one thread")
+)]
+#[inline]
+pub(crate) fn pool_chunks<R: Rows>(len: usize, parallel: bool) -> usize {
+    #[cfg(feature = "parallel")]
+    if parallel {
+        return len.div_ceil(chunk_len(len, R::MIN_CHUNK)).max(1);
+    }
+    1
 }
 
 /// Whether a stage of `n` marbles runs on the task pool (the `parallel` feature and at

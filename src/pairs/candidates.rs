@@ -164,8 +164,8 @@ impl PairSolver {
         );
         self.grid.build(&self.bound);
         self.candidates.clear();
-        let (candidates, grid, bound) = (&mut self.candidates, &self.grid, &self.bound);
-        grid.pairs(bound, |i, j| candidates.push((i.min(j), i.max(j))));
+        let chunks = &mut self.pair_chunks;
+        (self.grid).pairs_into(&self.bound, &mut self.candidates, chunks, parallel);
         self.drift = Vec3::ZERO;
         self.skin_valid = true;
     }

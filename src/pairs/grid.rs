@@ -1,6 +1,7 @@
 //! The broad phase's uniform grid, and the hasher of the warm-start keys.
 
 use super::*;
+use std::ops::Range;
 
 /// A fast hasher for warm-start keys (entity bits are already well spread).
 #[derive(Default, Clone, Copy)]
@@ -249,6 +250,17 @@ impl Grid {
     /// table, and a bucket holds one cell, so no cell is compared); hashed, from the
     /// per-axis terms of the hash, each multiplied once per body.
     pub(super) fn ordinary_pairs(&self, f: &mut impl FnMut(u32, u32)) {
+        self.ordinary_pairs_of(0..self.order.len(), f);
+    }
+
+    /// [`Grid::ordinary_pairs`] of the bodies in the bucket slots `slots` (each with the
+    /// later bodies of its cell and those of its forward neighbours, wherever they are):
+    /// the pairs of consecutive ranges of slots, one after another, are those of the
+    /// whole, in its order.
+    fn ordinary_pairs_of(&self, slots: Range<usize>, f: &mut impl FnMut(u32, u32)) {
+        // Once here, so that the slots' own loads need no check of their own.
+        let n = self.order.len();
+        assert!(slots.end <= n && self.cells.len() == n && self.bounds.len() == n);
         let near = |p: Vec4, q: Vec4| {
             let r = p.w + q.w;
             (p.truncate() - q.truncate()).length_squared() <= r * r
@@ -256,7 +268,7 @@ impl Grid {
         match self.dense {
             Some((_, dims)) if self.padded => {
                 let offset = FORWARD.map(|d| ((d.x * dims.y + d.y) * dims.z + d.z) as isize);
-                for p in 0..self.order.len() {
+                for p in slots {
                     let bp = self.bounds[p];
                     let h = self.bucket_of(self.cells[p]);
                     for q in p + 1..self.start[h + 1] as usize {
@@ -274,12 +286,12 @@ impl Grid {
                     }
                 }
             }
-            Some(_) => self.pairs_by_bucket(f),
+            Some(_) => self.pairs_by_bucket_of(slots, f),
             None => {
                 let terms = |c: i32, m: u32| {
                     [-1, 0, 1].map(|d: i32| (c.wrapping_add(d) as u32).wrapping_mul(m))
                 };
-                for p in 0..self.order.len() {
+                for p in slots {
                     let c = self.cells[p];
                     let bp = self.bounds[p];
                     let (hx, hy, hz) = (
@@ -310,12 +322,18 @@ impl Grid {
     /// The pairs of ordinary bodies: each (in the order of its bucket) against the later
     /// ones of its cell, then against those of each of its [`FORWARD`] neighbours in turn,
     /// every cell's bucket looked up.
+    #[cfg(test)]
     pub(super) fn pairs_by_bucket(&self, f: &mut impl FnMut(u32, u32)) {
+        self.pairs_by_bucket_of(0..self.order.len(), f);
+    }
+
+    /// [`Grid::pairs_by_bucket`] of the bodies in the bucket slots `slots`.
+    fn pairs_by_bucket_of(&self, slots: Range<usize>, f: &mut impl FnMut(u32, u32)) {
         let near = |p: Vec4, q: Vec4| {
             let r = p.w + q.w;
             (p.truncate() - q.truncate()).length_squared() <= r * r
         };
-        for p in 0..self.order.len() {
+        for p in slots {
             let c = self.cells[p];
             let bp = self.bounds[p];
             for q in p + 1..self.bucket_range(c).end {
@@ -336,11 +354,52 @@ impl Grid {
 
     /// Calls `f(i, j)` once for every pair of bodies whose bound spheres overlap.
     pub(crate) fn pairs(&self, b: &[Vec4], mut f: impl FnMut(u32, u32)) {
+        self.ordinary_pairs(&mut f);
+        self.large_pairs(b, f);
+    }
+
+    /// [`Grid::pairs`] pushed onto `out` as `(smaller, larger)`, in the same order. With
+    /// `parallel` (and the `parallel` feature) the ordinary bodies' pairs are found in
+    /// chunks of bucket slots on the task pool, each chunk's into its own buffer of
+    /// `chunks` (kept from call to call), and joined in the chunks' order.
+    pub(crate) fn pairs_into(
+        &self,
+        b: &[Vec4],
+        out: &mut Vec<(u32, u32)>,
+        chunks: &mut Vec<Vec<(u32, u32)>>,
+        parallel: bool,
+    ) {
+        let pieces = crate::systems::pool_chunks::<Slots<'_>>(self.order.len(), parallel);
+        if pieces > 1 {
+            chunks.resize_with(chunks.len().max(pieces), Vec::new);
+            let rows = Slots {
+                slots: 0..self.order.len(),
+                out: &mut chunks[..pieces],
+            };
+            crate::systems::run_rows(rows, parallel, |rows| {
+                let [found] = rows.out else {
+                    unreachable!("one buffer a chunk");
+                };
+                found.clear();
+                self.ordinary_pairs_of(rows.slots, &mut |i, j| {
+                    found.push((i.min(j), i.max(j)));
+                });
+            });
+            for found in &chunks[..pieces] {
+                out.extend_from_slice(found);
+            }
+        } else {
+            self.ordinary_pairs(&mut |i, j| out.push((i.min(j), i.max(j))));
+        }
+        self.large_pairs(b, |i, j| out.push((i.min(j), i.max(j))));
+    }
+
+    /// The pairs of the large bodies: with every ordinary body, then with each other.
+    fn large_pairs(&self, b: &[Vec4], mut f: impl FnMut(u32, u32)) {
         let near = |p: Vec4, q: Vec4| {
             let r = p.w + q.w;
             (p.truncate() - q.truncate()).length_squared() <= r * r
         };
-        self.ordinary_pairs(&mut f);
         // Large bodies: against every ordinary body through the cells their bound covers
         // (or all of them, when that is fewer), then against each other.
         let half = 0.5 * self.cell;
@@ -377,5 +436,32 @@ impl Grid {
                 }
             }
         }
+    }
+}
+
+/// A range of bucket slots and one pair buffer for each chunk that
+/// [`crate::systems::run_rows`] cuts it into ([`Grid::pairs_into`]).
+struct Slots<'a> {
+    slots: Range<usize>,
+    out: &'a mut [Vec<(u32, u32)>],
+}
+
+impl crate::systems::Rows for Slots<'_> {
+    fn len(&self) -> usize {
+        self.slots.len()
+    }
+
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let at = self.slots.start + mid;
+        let (head, tail) = self.out.split_at_mut(1);
+        let first = Slots {
+            slots: self.slots.start..at,
+            out: head,
+        };
+        let rest = Slots {
+            slots: at..self.slots.end,
+            out: tail,
+        };
+        (first, rest)
     }
 }

@@ -293,6 +293,8 @@ pub struct PairSolver {
     /// they were found, grown by the skin), and the grid over them.
     bound: Vec<Vec4>,
     grid: Grid,
+    /// The grid's pairs found by each chunk on the task pool ([`Grid::pairs_into`]).
+    pair_chunks: Vec<Vec<(u32, u32)>>,
     /// The candidates stand for these bodies (cleared when the bodies change).
     skin_valid: bool,
     /// This substep's spheres (scratch of [`PairSolver::cover`]), kept at the number of

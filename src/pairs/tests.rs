@@ -197,10 +197,15 @@ fn grid_pairs_match_brute_force() {
 
 /// The grid's pairs come in the order of a walk that looks up every neighbour cell's
 /// bucket ([`Grid::pairs_by_bucket`]), in both of its modes: the order of the candidate
-/// pairs, and so of the solver's rows, does not depend on how the buckets are found.
+/// pairs, and so of the solver's rows, does not depend on how the buckets are found; nor
+/// on whether they are found in chunks on the task pool ([`Grid::pairs_into`], with the
+/// `parallel` feature), whose pairs are joined in the order of one walk.
 #[test]
 fn grid_pairs_keep_the_bucket_walk_order() {
+    #[cfg(feature = "parallel")]
+    bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
     let mut rnd = uniform(54321);
+    let mut chunks = Vec::new();
     let (mut dense, mut pairs) = (0, 0);
     for case in 0..40 {
         let spread = if case % 2 == 0 { 1.0 } else { 0.12 };
@@ -217,6 +222,10 @@ fn grid_pairs_keep_the_bucket_walk_order() {
         grid.ordinary_pairs(&mut |i, j| fast.push((i, j)));
         grid.pairs_by_bucket(&mut |i, j| walked.push((i, j)));
         assert_eq!(fast, walked, "case {case}");
+        let (mut whole, mut joined) = (Vec::new(), Vec::new());
+        grid.pairs(&b, |i, j| whole.push((i.min(j), i.max(j))));
+        grid.pairs_into(&b, &mut joined, &mut chunks, true);
+        assert_eq!(joined, whole, "case {case}: pairs found in chunks");
         pairs += fast.len();
     }
     assert!(
