@@ -10,6 +10,14 @@ use super::*;
 /// was relative to the marbles' common drift ([`crate::pairs`], step 1).
 pub(super) const SKIN: f32 = 0.25;
 
+/// A marble that moved relative to the drift gets, when the candidate pairs are found
+/// afresh, a skin it would take about this many covers to cross at its pace since the
+/// last bounds (at least [`SKIN`], at most [`MAX_SKIN`] of its radius).
+pub(super) const SKIN_COVERS: f32 = 32.0;
+
+/// The largest skin, as a fraction of the radius.
+pub(super) const MAX_SKIN: f32 = 1.0;
+
 /// The candidate pairs are found afresh when more than this share of the marbles left
 /// their skins (fewer are paired one by one).
 pub(super) const STRAY_SHARE: usize = 8;
@@ -99,13 +107,21 @@ impl PairSolver {
     /// spheres `sphere(body)` (centre, radius) overlap ([`crate::pairs`], step 1).
     ///
     /// The candidates found on the bound spheres (each body's sphere when they were found,
-    /// grown by [`SKIN`]) stand while every body's sphere stays inside its bound, measured
+    /// grown by its skin) stand while every body's sphere stays inside its bound, measured
     /// after taking off the bodies' common drift since then (their mean displacement: two
     /// bodies' distance changes only by their displacements relative to any common one, so
     /// marbles sliding down a board together keep their pairs). Bodies that left their
     /// bound (strays) are paired afresh: with the others through the grid of bounds, with
     /// each other through a grid of their own. When the bodies changed, or more than one
     /// in [`STRAY_SHARE`] strayed, the candidates are found afresh.
+    ///
+    /// A skin is [`SKIN`] of the radius, except when the candidates are found afresh
+    /// because too many strayed: then a body that had no candidate partner gets a skin
+    /// sized for its pace relative to the drift since the last bounds, one it would take
+    /// [`SKIN_COVERS`] covers to cross, within [`MAX_SKIN`] of its radius. Sparse marbles
+    /// that fall and bounce (the labyrinth) then keep their bounds for several substeps
+    /// instead of straying at each; a marble in a crowd keeps the least skin, where a
+    /// wider one would pair it with the neighbours around it.
     #[cfg(test)]
     pub(super) fn cover(&mut self, sphere: impl Fn(&Body) -> Vec4) {
         let n = self.bodies.len();
@@ -129,7 +145,9 @@ impl PairSolver {
             && n > 0
             && self.bound.len() == n
             && !self.entities_changed.load(Ordering::Relaxed);
+        let mut moved = None;
         if same {
+            self.covers += 1;
             let drift = self.drift_since_bound(parallel);
             let count = AtomicUsize::new(0);
             let rows = (&mut self.stray[..], &self.spheres[..], &self.bound[..]);
@@ -153,15 +171,40 @@ impl PairSolver {
                 self.pair_strays();
                 return;
             }
+            moved = Some(drift);
+        }
+        match moved {
+            // Too many strayed: each skin sized for the marble's pace since the last
+            // bounds, relative to the drift (the docs of `cover`).
+            Some(drift) => {
+                // `stray` now marks the marbles that had a candidate partner.
+                self.stray.fill(false);
+                for &(i, j) in &self.candidates {
+                    self.stray[i as usize] = true;
+                    self.stray[j as usize] = true;
+                }
+                let per_cover = SKIN_COVERS / self.covers as f32;
+                let rows = (self.bound.iter_mut().zip(&self.spheres))
+                    .zip(self.radii.iter().zip(&self.stray));
+                for ((b, s), (r, &crowded)) in rows {
+                    let pace = (s.truncate() - drift - b.truncate()).length() * per_cover;
+                    let most = if crowded { SKIN } else { MAX_SKIN };
+                    let skin = pace.clamp(SKIN * r, most * r);
+                    *b = s.truncate().extend(s.w + skin);
+                }
+            }
+            None => {
+                self.bound.clear();
+                self.bound.extend(
+                    self.spheres
+                        .iter()
+                        .zip(&self.radii)
+                        .map(|(s, r)| s.truncate().extend(s.w + SKIN * r)),
+                );
+            }
         }
         self.stray.fill(false);
-        self.bound.clear();
-        self.bound.extend(
-            self.spheres
-                .iter()
-                .zip(&self.radii)
-                .map(|(s, r)| s.truncate().extend(s.w + SKIN * r)),
-        );
+        self.covers = 0;
         self.grid.build(&self.bound);
         self.candidates.clear();
         let chunks = &mut self.pair_chunks;

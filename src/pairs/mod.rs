@@ -13,8 +13,9 @@
 //! **Before integration** (stage `PairContacts`), at the substep's start:
 //! 1. **Broad phase** (`grid.rs`, `candidates.rs`): a uniform grid over each marble's sphere
 //!    around its free path, counting-sorted by cell; the pairs found stand for later
-//!    substeps (a Verlet list with a skin of a quarter radius, measured after taking off the
-//!    marbles' common drift), and the few marbles that leave their skins are paired afresh.
+//!    substeps (a Verlet list with a skin of a quarter radius, or up to a radius for a lone
+//!    marble moving relative to the others, measured after taking off the marbles' common
+//!    drift), and the few marbles that leave their skins are paired afresh.
 //! 2. **Narrow phase** (`narrow.rs`): exact sphere–sphere. A pair touching at the start is
 //!    judged on its closing speed *before this step's forces*: faster than
 //!    `restitution_threshold` is a collision, otherwise a contact.
@@ -297,6 +298,8 @@ pub struct PairSolver {
     pair_chunks: Vec<Vec<(u32, u32)>>,
     /// The candidates stand for these bodies (cleared when the bodies change).
     skin_valid: bool,
+    /// Covers since the bounds were made.
+    covers: u32,
     /// This substep's spheres (scratch of [`PairSolver::cover`]), kept at the number of
     /// marbles: each table's rows write theirs in place ([`PairSolver::gather_table`]).
     spheres: Vec<Vec4>,

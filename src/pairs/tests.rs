@@ -234,10 +234,11 @@ fn grid_pairs_keep_the_bucket_walk_order() {
     );
 }
 
-/// Over many substeps of marbles drifting together, jittering, a few jumping far and
-/// one leaving, the candidate pairs of [`PairSolver::cover`] hold every pair whose
-/// spheres overlap, each once, while the skin is kept (strays paired on their own)
-/// and rebuilt.
+/// Over many substeps of marbles drifting together, jittering, a few jumping far, a third
+/// of them rising through the rest for a while and one leaving, the candidate pairs of
+/// [`PairSolver::cover`] hold every pair whose spheres overlap, each once, while the skin
+/// is kept (strays paired on their own) and rebuilt, with skins grown for the marbles
+/// that move relative to the drift.
 #[test]
 fn kept_candidates_cover_every_overlapping_pair() {
     let mut uniform = uniform(99);
@@ -265,7 +266,7 @@ fn kept_candidates_cover_every_overlapping_pair() {
             }
         })
         .collect();
-    let (mut kept, mut with_strays) = (0, 0);
+    let (mut kept, mut with_strays, mut grown) = (0, 0, 0);
     for step in 0..200 {
         let drift = Vec3::new(0.004, -0.001, 0.002);
         for (k, b) in solver.bodies.iter_mut().enumerate() {
@@ -273,6 +274,9 @@ fn kept_candidates_cover_every_overlapping_pair() {
             b.x += drift + jitter;
             if (k + step) % 97 == 0 {
                 b.x += Vec3::new(rnd(), rnd(), rnd()) * 0.05;
+            }
+            if (60..100).contains(&step) && k % 3 == 0 {
+                b.x.y += 0.003;
             }
         }
         if step == 150 {
@@ -282,6 +286,9 @@ fn kept_candidates_cover_every_overlapping_pair() {
         solver.cover(|b| b.x.extend(1.1 * b.r));
         kept += usize::from(was_valid && solver.drift != Vec3::ZERO);
         with_strays += usize::from(!solver.strays.is_empty());
+        let least = |b: &Body| 1.1 * b.r + 1.01 * candidates::SKIN * b.r;
+        let mut bounds = solver.bound.iter().zip(&solver.bodies);
+        grown += usize::from(solver.drift == Vec3::ZERO && bounds.any(|(w, b)| w.w > least(b)));
         let mut found: Vec<(u32, u32)> = candidate_pairs(
             &solver.candidates,
             &solver.extra,
@@ -311,8 +318,8 @@ fn kept_candidates_cover_every_overlapping_pair() {
         }
     }
     assert!(
-        kept > 100 && with_strays > 50,
-        "kept {kept}, with strays {with_strays}"
+        kept > 100 && with_strays > 50 && grown > 10,
+        "kept {kept}, with strays {with_strays}, rebuilt with grown skins {grown}"
     );
 }
 
