@@ -275,6 +275,8 @@ impl BoardGeometry {
         let p = &self.parts[part];
         let local = if p.identity {
             *region
+        } else if p.unrotated {
+            Aabb::new(region.mins - p.translation, region.maxs - p.translation)
         } else {
             inverse_transform_aabb(region, p.translation, p.rotation)
         };
@@ -298,7 +300,7 @@ impl BoardGeometry {
             }
             Piece::Triangle(_) | Piece::Bowl(_) => return None,
         };
-        Some(p.rotation * n)
+        Some(if p.unrotated { n } else { p.rotation * n })
     }
 
     /// When piece `(part, sub)` is a half-space or a box and every centre within `spread` of
@@ -332,7 +334,7 @@ impl BoardGeometry {
             }
             Piece::Triangle(_) | Piece::Bowl(_) => return None,
         };
-        Some(p.rotation * n)
+        Some(if p.unrotated { n } else { p.rotation * n })
     }
 
     /// Whether every piece of part `part` is convex.
