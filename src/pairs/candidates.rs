@@ -1,6 +1,7 @@
 //! The kept candidate pairs (a Verlet list over the substeps) and the strays that left
 //! their skins.
 
+use std::ops::Range;
 use std::sync::atomic::AtomicUsize;
 
 use super::*;
@@ -124,12 +125,19 @@ impl PairSolver {
     /// wider one would pair it with the neighbours around it.
     #[cfg(test)]
     pub(super) fn cover(&mut self, sphere: impl Fn(&Body) -> Vec4) {
+        self.cover_with(sphere, false);
+    }
+
+    /// [`PairSolver::cover`], its passes on the task pool with `parallel` (and the
+    /// `parallel` feature).
+    #[cfg(test)]
+    pub(super) fn cover_with(&mut self, sphere: impl Fn(&Body) -> Vec4, parallel: bool) {
         let n = self.bodies.len();
         self.begin(n, &mut MarbleContacts::default());
         let entities: Vec<Entity> = self.bodies.iter().map(|b| b.entity).collect();
         let rows: Vec<(Vec4, f32)> = self.bodies.iter().map(|b| (sphere(b), b.r)).collect();
         self.gather_table(n).write(&entities, rows.into_iter());
-        self.cover_spheres(false);
+        self.cover_spheres(parallel);
     }
 
     /// [`PairSolver::cover`] on the gathered spheres; with `parallel`, the passes over
@@ -147,7 +155,7 @@ impl PairSolver {
             && !self.entities_changed.load(Ordering::Relaxed);
         let mut moved = None;
         if same {
-            self.covers += 1;
+            self.covers = self.covers.saturating_add(1);
             let drift = self.drift_since_bound(parallel);
             let count = AtomicUsize::new(0);
             let rows = (&mut self.stray[..], &self.spheres[..], &self.bound[..]);
@@ -168,7 +176,7 @@ impl PairSolver {
                     self.strays.extend(strays.map(|(k, _)| k));
                 }
                 self.drift = drift;
-                self.pair_strays();
+                self.pair_strays(parallel);
                 return;
             }
             moved = Some(drift);
@@ -293,20 +301,44 @@ impl PairSolver {
 
     /// The candidate pairs of the strays of a [`PairSolver::cover`]: each stray against
     /// the bounds (its sphere moved back by the common drift), and strays against each
-    /// other on their spheres.
-    pub(super) fn pair_strays(&mut self) {
+    /// other on their spheres. With `parallel`, the strays' searches of the bounds run in
+    /// chunks on the task pool, each chunk's pairs in a kept buffer, joined in the chunks'
+    /// order: the same pairs in the same order.
+    pub(super) fn pair_strays(&mut self, parallel: bool) {
         if self.strays.is_empty() {
             return;
         }
-        let (grid, bound, stray, extra) = (&self.grid, &self.bound, &self.stray, &mut self.extra);
-        for &i in &self.strays {
-            let s = self.spheres[i as usize];
-            grid.query(bound, (s.truncate() - self.drift).extend(s.w), |j| {
-                if !stray[j as usize] {
-                    extra.push((i.min(j), i.max(j)));
-                }
+        let (grid, bound, stray) = (&self.grid, &self.bound, &self.stray);
+        let (strays, spheres, drift) = (&self.strays, &self.spheres, self.drift);
+        let search = |of: Range<usize>, out: &mut Vec<(u32, u32)>| {
+            for &i in &strays[of] {
+                let s = spheres[i as usize];
+                grid.query(bound, (s.truncate() - drift).extend(s.w), |j| {
+                    if !stray[j as usize] {
+                        out.push((i.min(j), i.max(j)));
+                    }
+                });
+            }
+        };
+        let pieces = crate::systems::pool_chunks::<grid::Slots<'_>>(strays.len(), parallel);
+        if pieces > 1 {
+            let chunks = &mut self.pair_chunks;
+            chunks.resize_with(chunks.len().max(pieces), Vec::new);
+            let rows = grid::Slots::new(0..strays.len(), &mut chunks[..pieces]);
+            crate::systems::run_rows(rows, parallel, |rows| {
+                let (of, [found]) = rows.parts() else {
+                    unreachable!("one buffer a chunk");
+                };
+                found.clear();
+                search(of, found);
             });
+            for found in &chunks[..pieces] {
+                self.extra.extend_from_slice(found);
+            }
+        } else {
+            search(0..strays.len(), &mut self.extra);
         }
+        let extra = &mut self.extra;
         self.scratch_bound.clear();
         self.scratch_bound
             .extend(self.strays.iter().map(|&i| self.spheres[i as usize]));

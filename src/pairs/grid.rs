@@ -439,11 +439,24 @@ impl Grid {
     }
 }
 
-/// A range of bucket slots and one pair buffer for each chunk that
-/// [`crate::systems::run_rows`] cuts it into ([`Grid::pairs_into`]).
-struct Slots<'a> {
+/// A range of bucket slots (or of other work, as the strays' searches) and one pair
+/// buffer for each chunk that [`crate::systems::run_rows`] cuts it into
+/// ([`Grid::pairs_into`]).
+pub(super) struct Slots<'a> {
     slots: Range<usize>,
     out: &'a mut [Vec<(u32, u32)>],
+}
+
+impl<'a> Slots<'a> {
+    /// `slots` with one buffer for each chunk.
+    pub(super) fn new(slots: Range<usize>, out: &'a mut [Vec<(u32, u32)>]) -> Self {
+        Slots { slots, out }
+    }
+
+    /// A chunk's range and its buffers (one).
+    pub(super) fn parts(self) -> (Range<usize>, &'a mut [Vec<(u32, u32)>]) {
+        (self.slots, self.out)
+    }
 }
 
 impl crate::systems::Rows for Slots<'_> {
