@@ -234,6 +234,26 @@ fn grid_pairs_keep_the_bucket_walk_order() {
     );
 }
 
+/// Marble `k` (entity `k + 1`) at rest at `x`, radius `r`, unit mass: a body for the
+/// broad phase's tests, which read only its place and size.
+fn resting(k: usize, x: Vec3, r: f32) -> Body {
+    Body {
+        entity: Entity::from_raw_u32(k as u32 + 1).unwrap(),
+        x,
+        x0: x,
+        v: Vec3::ZERO,
+        v0: Vec3::ZERO,
+        w: 1.0,
+        r,
+        e: 0.5,
+        a: Vec3::ZERO,
+        d: Vec3::ZERO,
+        omega: Vec3::ZERO,
+        spins: false,
+        mu: 0.5,
+    }
+}
+
 /// Over many substeps of marbles drifting together, jittering, a few jumping far, a third
 /// of them rising through the rest for a while and one leaving, the candidate pairs of
 /// [`PairSolver::cover`] hold every pair whose spheres overlap, each once, while the skin
@@ -249,21 +269,7 @@ fn kept_candidates_cover_every_overlapping_pair() {
     solver.bodies = (0..n)
         .map(|k| {
             let x = Vec3::new(rnd(), 0.3 * rnd(), rnd()) * 0.5;
-            Body {
-                entity: Entity::from_raw_u32(k as u32 + 1).unwrap(),
-                x,
-                x0: x,
-                v: Vec3::ZERO,
-                v0: Vec3::ZERO,
-                w: 1.0,
-                r: if k % 50 == 0 { 4.0 * r } else { r },
-                e: 0.5,
-                a: Vec3::ZERO,
-                d: Vec3::ZERO,
-                omega: Vec3::ZERO,
-                spins: false,
-                mu: 0.5,
-            }
+            resting(k, x, if k % 50 == 0 { 4.0 * r } else { r })
         })
         .collect();
     let (mut kept, mut with_strays, mut grown) = (0, 0, 0);
@@ -338,21 +344,7 @@ fn stray_pairs_found_in_chunks_keep_their_order() {
     let bodies: Vec<Body> = (0..n)
         .map(|k| {
             let x = Vec3::new(rnd(), 0.2 * rnd(), rnd()) * 0.6;
-            Body {
-                entity: Entity::from_raw_u32(k as u32 + 1).unwrap(),
-                x,
-                x0: x,
-                v: Vec3::ZERO,
-                v0: Vec3::ZERO,
-                w: 1.0,
-                r,
-                e: 0.5,
-                a: Vec3::ZERO,
-                d: Vec3::ZERO,
-                omega: Vec3::ZERO,
-                spins: false,
-                mu: 0.5,
-            }
+            resting(k, x, r)
         })
         .collect();
     let moves: Vec<Vec3> = (0..n / 10)
