@@ -168,6 +168,18 @@ impl<T: Send> Rows for &mut [T] {
     }
 }
 
+/// Rows given by their indices alone.
+impl Rows for std::ops::Range<usize> {
+    fn len(&self) -> usize {
+        ExactSizeIterator::len(self)
+    }
+
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let at = self.start + mid;
+        (self.start..at, at..self.end)
+    }
+}
+
 /// Columns side by side (a tuple of slices, or of other [`Rows`]) split together; the
 /// first says how many rows there are.
 macro_rules! tuple_rows {

@@ -96,6 +96,91 @@ pub(super) fn for_body_pairs(
     }
 }
 
+/// The candidate pairs ([`for_body_pairs`]) cut at `range` of their order (the kept
+/// candidates first, then `extra`).
+#[inline]
+fn for_body_pairs_in(
+    range: Range<usize>,
+    candidates: &[(u32, u32)],
+    extra: &[(u32, u32)],
+    strays: (&[bool], &[u32]),
+    local: Option<&[u32]>,
+    each: impl FnMut((u32, u32)),
+) {
+    let n = candidates.len();
+    let kept = &candidates[range.start.min(n)..range.end.min(n)];
+    let extra = &extra[range.start.saturating_sub(n)..range.end.saturating_sub(n)];
+    for_body_pairs(kept, extra, strays, local, each);
+}
+
+/// [`for_body_pairs`] with `each` pushing what it finds of a pair onto a buffer, which is
+/// `out`: with `parallel` (and the `parallel` feature), in chunks of the pairs on the
+/// task pool, each chunk's into its own buffer of `chunks`, joined in the chunks' order
+/// ([`grid::scan_chunked`]): the same values in the same order either way.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the candidate lists, handed over"
+)]
+pub(super) fn scan_body_pairs<T: Copy + Send>(
+    candidates: &[(u32, u32)],
+    extra: &[(u32, u32)],
+    strays: (&[bool], &[u32]),
+    local: Option<&[u32]>,
+    parallel: bool,
+    chunks: &mut Vec<Vec<T>>,
+    out: &mut Vec<T>,
+    each: impl Fn((u32, u32), &mut Vec<T>) + Sync,
+) {
+    let total = candidates.len() + extra.len();
+    grid::scan_chunked(total, parallel, chunks, out, |range, found| {
+        for_body_pairs_in(range, candidates, extra, strays, local, |pair| {
+            each(pair, found)
+        });
+    });
+}
+
+/// Whether `test` holds for any candidate pair ([`for_body_pairs`]): with `parallel` (and
+/// the `parallel` feature), the pairs are cut into chunks on the task pool, each of which
+/// stops once any chunk has found one.
+pub(super) fn any_body_pair(
+    candidates: &[(u32, u32)],
+    extra: &[(u32, u32)],
+    strays: (&[bool], &[u32]),
+    local: Option<&[u32]>,
+    parallel: bool,
+    test: impl Fn((u32, u32)) -> bool + Sync,
+) -> bool {
+    let total = candidates.len() + extra.len();
+    let pieces = crate::systems::pool_chunks::<Range<usize>>(total, parallel);
+    if pieces == 1 {
+        let mut pairs = candidate_pairs(candidates, extra, strays.0, strays.1);
+        return match local {
+            Some(local) => pairs
+                .map(|(i, j)| (local[i as usize], local[j as usize]))
+                .any(test),
+            None => pairs.any(test),
+        };
+    }
+    let found = AtomicBool::new(false);
+    crate::systems::run_rows(0..total, parallel, |range: Range<usize>| {
+        let n = candidates.len();
+        let kept = &candidates[range.start.min(n)..range.end.min(n)];
+        let extra = &extra[range.start.saturating_sub(n)..range.end.saturating_sub(n)];
+        let mut pairs = candidate_pairs(kept, extra, strays.0, strays.1);
+        let mut test = |pair| found.load(Ordering::Relaxed) || test(pair);
+        let any = match local {
+            Some(local) => pairs
+                .map(|(i, j)| (local[i as usize], local[j as usize]))
+                .any(&mut test),
+            None => pairs.any(&mut test),
+        };
+        if any {
+            found.store(true, Ordering::Relaxed);
+        }
+    });
+    found.into_inner()
+}
+
 /// The bodies are the marbles of the candidate pairs, not every marble, when those are
 /// at most one marble in this many ([`PairSolver::select_bodies`]).
 pub(super) const SELECT_SHARE: usize = 8;
@@ -320,33 +405,22 @@ impl PairSolver {
                 });
             }
         };
-        let pieces = crate::systems::pool_chunks::<grid::Slots<'_>>(strays.len(), parallel);
-        if pieces > 1 {
-            let chunks = &mut self.pair_chunks;
-            chunks.resize_with(chunks.len().max(pieces), Vec::new);
-            let rows = grid::Slots::new(0..strays.len(), &mut chunks[..pieces]);
-            crate::systems::run_rows(rows, parallel, |rows| {
-                let (of, [found]) = rows.parts() else {
-                    unreachable!("one buffer a chunk");
-                };
-                found.clear();
-                search(of, found);
-            });
-            for found in &chunks[..pieces] {
-                self.extra.extend_from_slice(found);
-            }
-        } else {
-            search(0..strays.len(), &mut self.extra);
-        }
-        let extra = &mut self.extra;
+        let (chunks, extra) = (&mut self.pair_chunks, &mut self.extra);
+        grid::scan_chunked(strays.len(), parallel, chunks, extra, search);
         self.scratch_bound.clear();
         self.scratch_bound
             .extend(self.strays.iter().map(|&i| self.spheres[i as usize]));
         self.scratch_grid.build(&self.scratch_bound);
-        let strays = &self.strays;
-        self.scratch_grid.pairs(&self.scratch_bound, |a, b| {
-            let (i, j) = (strays[a as usize], strays[b as usize]);
-            extra.push((i.min(j), i.max(j)));
-        });
+        let (chunks, extra, strays) = (&mut self.pair_chunks, &mut self.extra, &self.strays);
+        (self.scratch_grid).scan_pairs(
+            &self.scratch_bound,
+            extra,
+            chunks,
+            parallel,
+            |a, b, out| {
+                let (i, j) = (strays[a as usize], strays[b as usize]);
+                out.push((i.min(j), i.max(j)));
+            },
+        );
     }
 }

@@ -369,29 +369,28 @@ impl Grid {
         chunks: &mut Vec<Vec<(u32, u32)>>,
         parallel: bool,
     ) {
-        let pieces = crate::systems::pool_chunks::<Slots<'_>>(self.order.len(), parallel);
-        if pieces > 1 {
-            chunks.resize_with(chunks.len().max(pieces), Vec::new);
-            let rows = Slots {
-                slots: 0..self.order.len(),
-                out: &mut chunks[..pieces],
-            };
-            crate::systems::run_rows(rows, parallel, |rows| {
-                let [found] = rows.out else {
-                    unreachable!("one buffer a chunk");
-                };
-                found.clear();
-                self.ordinary_pairs_of(rows.slots, &mut |i, j| {
-                    found.push((i.min(j), i.max(j)));
-                });
-            });
-            for found in &chunks[..pieces] {
-                out.extend_from_slice(found);
-            }
-        } else {
-            self.ordinary_pairs(&mut |i, j| out.push((i.min(j), i.max(j))));
-        }
-        self.large_pairs(b, |i, j| out.push((i.min(j), i.max(j))));
+        self.scan_pairs(b, out, chunks, parallel, |i, j, out| {
+            out.push((i.min(j), i.max(j)));
+        });
+    }
+
+    /// [`Grid::pairs`] with `each` pushing what it finds of a pair onto a buffer, which
+    /// is `out`: with `parallel` (and the `parallel` feature) the ordinary bodies' pairs
+    /// are found in chunks of bucket slots on the task pool, each chunk pushing onto its
+    /// own buffer of `chunks` (kept from call to call), joined onto `out` in the chunks'
+    /// order. Either way `out` gets the same values in the same order.
+    pub(crate) fn scan_pairs<T: Copy + Send>(
+        &self,
+        b: &[Vec4],
+        out: &mut Vec<T>,
+        chunks: &mut Vec<Vec<T>>,
+        parallel: bool,
+        each: impl Fn(u32, u32, &mut Vec<T>) + Sync,
+    ) {
+        scan_chunked(self.order.len(), parallel, chunks, out, |slots, found| {
+            self.ordinary_pairs_of(slots, &mut |i, j| each(i, j, found));
+        });
+        self.large_pairs(b, |i, j| each(i, j, out));
     }
 
     /// The pairs of the large bodies: with every ordinary body, then with each other.
@@ -439,29 +438,51 @@ impl Grid {
     }
 }
 
-/// A range of bucket slots (or of other work, as the strays' searches) and one pair
-/// buffer for each chunk that [`crate::systems::run_rows`] cuts it into
-/// ([`Grid::pairs_into`]).
-pub(super) struct Slots<'a> {
+/// Runs `each` over the work `0..len`, pushing what it finds onto a buffer, which is
+/// `out`: with `parallel` (and the `parallel` feature), the work is cut into ranges
+/// handed to the task pool, each pushing onto its own buffer of `chunks` (kept from call
+/// to call), joined onto `out` in the ranges' order. When `each` over consecutive ranges
+/// finds what it finds over their union, in its order, `out` gets the same values in the
+/// same order either way.
+pub(super) fn scan_chunked<T: Copy + Send>(
+    len: usize,
+    parallel: bool,
+    chunks: &mut Vec<Vec<T>>,
+    out: &mut Vec<T>,
+    each: impl Fn(Range<usize>, &mut Vec<T>) + Sync,
+) {
+    let pieces = crate::systems::pool_chunks::<Slots<'_, T>>(len, parallel);
+    if pieces > 1 {
+        chunks.resize_with(chunks.len().max(pieces), Vec::new);
+        let rows = Slots {
+            slots: 0..len,
+            out: &mut chunks[..pieces],
+        };
+        crate::systems::run_rows(rows, parallel, |rows| {
+            let [found] = rows.out else {
+                unreachable!("one buffer a chunk");
+            };
+            found.clear();
+            each(rows.slots, found);
+        });
+        for found in &chunks[..pieces] {
+            out.extend_from_slice(found);
+        }
+    } else {
+        each(0..len, out);
+    }
+}
+
+/// A range of work (bucket slots, strays, candidate pairs, …) and one buffer for each
+/// chunk that [`crate::systems::run_rows`] cuts it into ([`scan_chunked`]).
+struct Slots<'a, T> {
     slots: Range<usize>,
-    out: &'a mut [Vec<(u32, u32)>],
+    out: &'a mut [Vec<T>],
 }
 
-impl<'a> Slots<'a> {
-    /// `slots` with one buffer for each chunk.
-    pub(super) fn new(slots: Range<usize>, out: &'a mut [Vec<(u32, u32)>]) -> Self {
-        Slots { slots, out }
-    }
-
-    /// A chunk's range and its buffers (one).
-    pub(super) fn parts(self) -> (Range<usize>, &'a mut [Vec<(u32, u32)>]) {
-        (self.slots, self.out)
-    }
-}
-
-impl crate::systems::Rows for Slots<'_> {
+impl<T: Send> crate::systems::Rows for Slots<'_, T> {
     fn len(&self) -> usize {
-        self.slots.len()
+        ExactSizeIterator::len(&self.slots)
     }
 
     fn split_at(self, mid: usize) -> (Self, Self) {

@@ -59,68 +59,72 @@ impl PairSolver {
             );
             self.scratch_grid.build(&self.scratch_bound);
         }
-        {
-            let (bodies, known_start, known, late, event, changed, stray, late_bodies) = (
-                &self.bodies,
-                &self.known_start,
-                &self.known,
-                &mut self.late,
-                &self.event,
-                &self.changed,
-                &self.stray,
-                &self.late_bodies,
-            );
-            let mut check = |i: u32, j: u32| {
-                let (i, j) = (i.min(j), i.max(j));
-                if i == j {
-                    return;
-                }
-                // Most candidates do not overlap, and in a pile most that do are rows
-                // already: the distance test, then the row lookup, then the tracing back.
-                if late_touch(bodies, i, j, p)
-                    && !known
-                        [known_start[i as usize] as usize..known_start[i as usize + 1] as usize]
-                        .contains(&j)
-                    && let Some(row) = late_row(bodies, event, i, j, p)
-                {
-                    late.push(row);
-                }
-            };
-            if !all {
-                for (m, &i) in self.moved.iter().enumerate() {
+        let (bodies, known_start, known, event, changed, stray) = (
+            &self.bodies,
+            &self.known_start,
+            &self.known,
+            &self.event,
+            &self.changed,
+            &self.stray,
+        );
+        let check = |i: u32, j: u32, late: &mut Vec<Row>| {
+            let (i, j) = (i.min(j), i.max(j));
+            if i == j {
+                return;
+            }
+            // Most candidates do not overlap, and in a pile most that do are rows
+            // already: the distance test, then the row lookup, then the tracing back.
+            if late_touch(bodies, i, j, p)
+                && !known[known_start[i as usize] as usize..known_start[i as usize + 1] as usize]
+                    .contains(&j)
+                && let Some(row) = late_row(bodies, event, i, j, p)
+            {
+                late.push(row);
+            }
+        };
+        // With `parallel`, each search in chunks on the task pool, joined in their order.
+        let (parallel, chunks, late) = (self.on_pool, &mut self.row_chunks, &mut self.late);
+        if !all {
+            let (grid, bound, moved, strays) = (&self.grid, &self.bound, &self.moved, &self.strays);
+            let drift = self.drift;
+            grid::scan_chunked(moved.len(), parallel, chunks, late, |of, late| {
+                for m in of {
+                    let i = moved[m];
                     let b = &bodies[i as usize];
                     let tol = crate::board_contact::touch_tolerance(p.tolerance, b.r, b.x);
-                    let s = (b.x - self.drift).extend(b.r + tol);
-                    self.grid.query(&self.bound, s, |j| {
+                    let s = (b.x - drift).extend(b.r + tol);
+                    grid.query(bound, s, |j| {
                         // Pairs of moved marbles, and strays (outside their bounds), are
                         // checked below, once.
                         if !changed[j as usize] && !stray[j as usize] {
-                            check(i, j);
+                            check(i, j, late);
                         }
                     });
                     if few {
-                        for &j in &self.moved[m + 1..] {
-                            check(i, j);
+                        for &j in &moved[m + 1..] {
+                            check(i, j, late);
                         }
-                        for &j in &self.strays {
+                        for &j in strays {
                             if !changed[j as usize] {
-                                check(i, j);
+                                check(i, j, late);
                             }
                         }
                     }
                 }
-            }
-            if all {
-                self.scratch_grid.pairs(&self.scratch_bound, &mut check);
-            } else if !few {
-                // Moved marbles with each other and with the strays they did not move.
-                self.scratch_grid.pairs(&self.scratch_bound, |a, b| {
-                    let (i, j) = (late_bodies[a as usize], late_bodies[b as usize]);
-                    if changed[i as usize] || changed[j as usize] {
-                        check(i, j);
-                    }
-                });
-            }
+            });
+        }
+        let (grid, bound) = (&self.scratch_grid, &self.scratch_bound);
+        if all {
+            grid.scan_pairs(bound, late, chunks, parallel, check);
+        } else if !few {
+            // Moved marbles with each other and with the strays they did not move.
+            let late_bodies = &self.late_bodies;
+            grid.scan_pairs(bound, late, chunks, parallel, |a, b, late| {
+                let (i, j) = (late_bodies[a as usize], late_bodies[b as usize]);
+                if changed[i as usize] || changed[j as usize] {
+                    check(i, j, late);
+                }
+            });
         }
     }
 
@@ -262,69 +266,91 @@ impl PairSolver {
     /// pair's restitution), slower it stops approaching, and it moves on for the rest of the
     /// substep (a few impacts at most). Boards it already touched at its last event that
     /// it now presses into put it back on their surface and stop its approach.
+    ///
+    /// Each marble's search depends on that marble alone: with `parallel`, the marbles
+    /// are cut into chunks on the task pool, with the same bits.
     pub(super) fn onto_boards(&mut self, p: &PairParams, boards: &[BoardSnapshot]) {
-        let (mut touching, mut touches) = (TouchList::default(), TouchList::default());
-        for (k, b) in self.bodies.iter_mut().enumerate() {
-            if !self.changed[k] {
-                continue;
-            }
-            let tol = crate::board_contact::touch_tolerance(p.tolerance, b.r, b.x);
-            let material = Material {
-                restitution: b.e,
-                ..Material::default()
+        let rows = (
+            self.bodies.as_mut_slice(),
+            self.changed.as_slice(),
+            self.event.as_mut_slice(),
+        );
+        crate::systems::run_rows(rows, self.on_pool, |(bodies, changed, event)| {
+            onto_boards_of(p, boards, bodies, changed, event);
+        });
+    }
+}
+
+/// [`PairSolver::onto_boards`] for `bodies`, with their `changed` marks and `event`
+/// times.
+fn onto_boards_of(
+    p: &PairParams,
+    boards: &[BoardSnapshot],
+    bodies: &mut [Body],
+    changed: &[bool],
+    event: &mut [f32],
+) {
+    let (mut touching, mut touches) = (TouchList::default(), TouchList::default());
+    for (k, b) in bodies.iter_mut().enumerate() {
+        if !changed[k] {
+            continue;
+        }
+        let tol = crate::board_contact::touch_tolerance(p.tolerance, b.r, b.x);
+        let material = Material {
+            restitution: b.e,
+            ..Material::default()
+        };
+        let r = b.r;
+        // The boards within touching distance of centre `x` moving at `v`, at time `t`.
+        let gather = |t: f32, x: Vec3, v: Vec3, out: &mut TouchList| {
+            crate::board_contact::gather(boards, None, t, x, r, tol, &material, -v, out);
+        };
+        let mut t0 = event[k].min(p.h);
+        let mut start = b.x - b.v * (p.h - t0);
+        gather(t0, start, b.v, &mut touching);
+        for _ in 0..BOARD_IMPACTS {
+            let path = Path {
+                t0,
+                x: start,
+                v: b.v,
+                a: Vec3::ZERO,
             };
-            let r = b.r;
-            // The boards within touching distance of centre `x` moving at `v`, at time `t`.
-            let gather = |t: f32, x: Vec3, v: Vec3, out: &mut TouchList| {
-                crate::board_contact::gather(boards, None, t, x, r, tol, &material, -v, out);
+            let Some((tau, piece)) = crate::board_contact::earliest_impact(
+                boards,
+                None,
+                &path,
+                p.h - t0,
+                b.r,
+                tol,
+                &touching,
+            ) else {
+                break;
             };
-            let mut t0 = self.event[k].min(p.h);
-            let mut start = b.x - b.v * (p.h - t0);
-            gather(t0, start, b.v, &mut touching);
-            for _ in 0..BOARD_IMPACTS {
-                let path = Path {
-                    t0,
-                    x: start,
-                    v: b.v,
-                    a: Vec3::ZERO,
-                };
-                let Some((tau, piece)) = crate::board_contact::earliest_impact(
-                    boards,
-                    None,
-                    &path,
-                    p.h - t0,
-                    b.r,
-                    tol,
-                    &touching,
-                ) else {
-                    break;
-                };
-                let at = path.position(tau);
-                gather(t0 + tau, at, b.v, &mut touches);
-                let Some(t) = touches.as_slice().iter().find(|t| t.piece == piece) else {
-                    break;
-                };
-                let u = (b.v - t.board_velocity).dot(t.normal);
-                if u < -p.threshold {
-                    b.v -= (1.0 + t.material.restitution) * u * t.normal;
-                } else if u < 0.0 {
-                    b.v -= u * t.normal;
-                }
-                t0 += tau;
-                start = at;
-                b.x = at + b.v * (p.h - t0);
-                self.event[k] = t0;
-                touching = touches;
+            let at = path.position(tau);
+            gather(t0 + tau, at, b.v, &mut touches);
+            let Some(t) = touches.as_slice().iter().find(|t| t.piece == piece) else {
+                break;
+            };
+            let u = (b.v - t.board_velocity).dot(t.normal);
+            if u < -p.threshold {
+                b.v -= (1.0 + t.material.restitution) * u * t.normal;
+            } else if u < 0.0 {
+                b.v -= u * t.normal;
             }
-            // The boards it touched when it was last set moving: pressed into, it stays on
-            // them.
-            for t in touching.as_slice() {
-                let depth = b.r - (b.x - t.point).dot(t.normal);
-                let u = (b.v - t.board_velocity).dot(t.normal);
-                if depth > 0.0 && u < 0.0 {
-                    b.v -= u * t.normal;
-                    b.x += depth * t.normal;
-                }
+            t0 += tau;
+            start = at;
+            b.x = at + b.v * (p.h - t0);
+            event[k] = t0;
+            touching = touches;
+        }
+        // The boards it touched when it was last set moving: pressed into, it stays on
+        // them.
+        for t in touching.as_slice() {
+            let depth = b.r - (b.x - t.point).dot(t.normal);
+            let u = (b.v - t.board_velocity).dot(t.normal);
+            if depth > 0.0 && u < 0.0 {
+                b.v -= u * t.normal;
+                b.x += depth * t.normal;
             }
         }
     }

@@ -67,7 +67,7 @@ mod project;
 mod rows;
 mod solve;
 
-use candidates::{candidate_pairs, for_body_pairs};
+use candidates::{any_body_pair, scan_body_pairs};
 pub(crate) use grid::{Grid, KeyMap};
 use narrow::{
     deep_impact, late_row, late_touch, may_impact_deeply, narrow, near_row, rounding_slack, shallow,
@@ -296,6 +296,11 @@ pub struct PairSolver {
     grid: Grid,
     /// The grid's pairs found by each chunk on the task pool ([`Grid::pairs_into`]).
     pair_chunks: Vec<Vec<(u32, u32)>>,
+    /// Whether the narrow phases over the candidate pairs run on the task pool (set by
+    /// [`PairSolver::cover_gathered`]), and the rows each chunk found there
+    /// ([`scan_body_pairs`]).
+    on_pool: bool,
+    row_chunks: Vec<Vec<Row>>,
     /// The candidates stand for these bodies (cleared when the bodies change).
     skin_valid: bool,
     /// Covers since the bounds were made.
@@ -638,8 +643,10 @@ impl PairSolver {
 
     /// The broad phase on the gathered spheres (module docs, step 1); whether any two
     /// marbles can meet. With `parallel` (and the `parallel` feature), its passes over
-    /// the marbles run in chunks on the task pool, with the same bits.
+    /// the marbles, and the narrow phases' over the candidate pairs that follow, run in
+    /// chunks on the task pool, with the same bits.
     pub fn cover_gathered(&mut self, parallel: bool) -> bool {
+        self.on_pool = parallel;
         debug_assert_eq!(
             self.gather_at,
             self.spheres.len(),
@@ -710,17 +717,26 @@ impl PairSolver {
         // 2. The touching pairs, and the pairs that could close their gap this substep.
         self.rows.clear();
         let local = self.compact.then_some(self.local.as_slice());
-        let (bodies, rows) = (&self.bodies, &mut self.rows);
+        let bodies = &self.bodies;
         let strays = (self.stray.as_slice(), self.strays.as_slice());
-        for_body_pairs(&self.candidates, &self.extra, strays, local, |(i, j)| {
-            if let Some(row) = narrow(bodies, i, j, p) {
-                if row.kind == Found::Start {
+        scan_body_pairs(
+            &self.candidates,
+            &self.extra,
+            strays,
+            local,
+            self.on_pool,
+            &mut self.row_chunks,
+            &mut self.rows,
+            |(i, j), rows| {
+                if let Some(row) = narrow(bodies, i, j, p) {
+                    if row.kind == Found::Start {
+                        rows.push(row);
+                    }
+                } else if let Some(row) = near_row(bodies, i, j, p) {
                     rows.push(row);
                 }
-            } else if let Some(row) = near_row(bodies, i, j, p) {
-                rows.push(row);
-            }
-        });
+            },
+        );
         if self.rows.is_empty() {
             self.warm.clear();
             return false;
@@ -773,15 +789,16 @@ impl PairSolver {
             may_impact_deeply(bodies, i, j, slack)
                 && narrow(bodies, i, j, p).is_some_and(|row| deep_impact(bodies, &row))
         };
-        let mut pairs = candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays);
-        if self.compact {
-            let local = &self.local;
-            pairs
-                .map(|(i, j)| (local[i as usize], local[j as usize]))
-                .any(deep)
-        } else {
-            pairs.any(deep)
-        }
+        let strays = (self.stray.as_slice(), self.strays.as_slice());
+        let local = self.compact.then_some(self.local.as_slice());
+        any_body_pair(
+            &self.candidates,
+            &self.extra,
+            strays,
+            local,
+            self.on_pool,
+            deep,
+        )
     }
 
     /// After [`PairSolver::any_deep_impact`] found one: the collisions that follow may
@@ -809,27 +826,37 @@ impl PairSolver {
         self.changed.clear();
         self.changed.resize(n, false);
         self.rows.clear();
-        let mut any = false;
-        let pairs = candidate_pairs(&self.candidates, &self.extra, &self.stray, &self.strays);
-        for (i, j) in pairs {
-            if let Some(mut row) = narrow(&self.bodies, i, j, p) {
-                if row.kind == Found::Impact {
-                    if shallow(&self.bodies, &row) {
+        let bodies = &self.bodies;
+        let strays = (self.stray.as_slice(), self.strays.as_slice());
+        scan_body_pairs(
+            &self.candidates,
+            &self.extra,
+            strays,
+            None,
+            self.on_pool,
+            &mut self.row_chunks,
+            &mut self.rows,
+            |(i, j), rows| {
+                if let Some(mut row) = narrow(bodies, i, j, p) {
+                    if row.kind == Found::Impact && shallow(bodies, &row) {
                         // An impact that leaves the pair overlapping by less than a small
                         // share of the radius is left to the next substep's contact stage,
                         // which judges it on the same closing speed; resolving it here
                         // would move a settled pile for nothing.
                         row.limit = f32::INFINITY;
-                    } else {
-                        any |= row.u < 0.0;
+                    }
+                    if row.kind != Found::End {
+                        rows.push(row);
                     }
                 }
-                if row.kind != Found::End {
-                    self.rows.push(row);
-                }
-            }
-        }
-        debug_assert!(any, "the search before found a deep impact");
+            },
+        );
+        debug_assert!(
+            self.rows
+                .iter()
+                .any(|row| row.kind == Found::Impact && row.limit != f32::INFINITY && row.u < 0.0),
+            "the search before found a deep impact"
+        );
     }
 
     /// Debug builds: the bodies are the marbles the broad phase chose.

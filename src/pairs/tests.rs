@@ -1,3 +1,4 @@
+use super::candidates::{candidate_pairs, for_body_pairs};
 use super::late::LateSearch;
 use super::*;
 
@@ -370,6 +371,54 @@ fn stray_pairs_found_in_chunks_keep_their_order() {
     }
     assert!(found[0].len() > 100, "{} stray pairs", found[0].len());
     assert_eq!(found[0], found[1], "stray pairs found in chunks");
+}
+
+/// The candidate pairs' narrow phase in chunks on the task pool (with the `parallel`
+/// feature) sees the pairs of one walk, in its order: 6,000 kept candidates (those with a
+/// stray marble left out) and 3,000 strays' pairs, through a selection's indices, cut
+/// into chunks of which one spans the two lists; and whether any pair passes a test is
+/// the same either way.
+#[test]
+fn candidate_pairs_scanned_in_chunks_keep_their_order() {
+    #[cfg(feature = "parallel")]
+    bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
+    let mut uniform = uniform(11);
+    let n = 2000;
+    let mut pick = move || ((uniform() * n as f32) as u32).min(n as u32 - 1);
+    let candidates: Vec<(u32, u32)> = (0..6000).map(|_| (pick(), pick())).collect();
+    let extra: Vec<(u32, u32)> = (0..3000).map(|_| (pick(), pick())).collect();
+    let stray: Vec<bool> = (0..n).map(|k| k % 17 == 0).collect();
+    let strays: Vec<u32> = (0..n as u32).filter(|&k| stray[k as usize]).collect();
+    let local: Vec<u32> = (0..n as u32).rev().collect();
+    let strays = (stray.as_slice(), strays.as_slice());
+    let mut walked = Vec::new();
+    for_body_pairs(&candidates, &extra, strays, Some(&local), |pair| {
+        walked.push(pair);
+    });
+    let pairs = walked.len();
+    assert!(pairs > 8000 && pairs < 9000, "{pairs} pairs");
+    let (mut chunks, mut scanned) = (Vec::new(), Vec::new());
+    let each = |pair: (u32, u32), out: &mut Vec<(u32, u32)>| out.push(pair);
+    scan_body_pairs(
+        &candidates,
+        &extra,
+        strays,
+        Some(&local),
+        true,
+        &mut chunks,
+        &mut scanned,
+        each,
+    );
+    assert_eq!(walked, scanned, "candidate pairs scanned in chunks");
+    #[cfg(feature = "parallel")]
+    assert!(chunks.len() > 1, "the scan was cut into chunks");
+    let last = *walked.last().unwrap();
+    for (target, expected) in [(last, true), ((n as u32, n as u32), false)] {
+        let any = any_body_pair(&candidates, &extra, strays, Some(&local), true, |pair| {
+            pair == target
+        });
+        assert_eq!(any, expected, "any pair equal to {target:?}");
+    }
 }
 
 /// Bodies for only the marbles of the candidate pairs ([`PairSolver::select_bodies`]) give
