@@ -7,6 +7,8 @@ impl PairSolver {
     /// colour neither of its marbles has yet; beyond 31 they share the last): consecutive
     /// rows then rarely share a marble, so that one row's update does not wait on the one
     /// before it.
+    // Out of line: see `PairSolver::run_passes`.
+    #[inline(never)]
     pub(super) fn colour_rows(&mut self) {
         const LAST: u32 = COLOURS as u32 - 1;
         self.colours.clear();

@@ -17,6 +17,8 @@ pub(super) const PROJECTION_PASSES: usize = 4;
 
 impl PairSolver {
     /// Step 5 of [`crate::pairs`]: overlap beyond the slop out of positions.
+    // Out of line: see `PairSolver::run_passes`.
+    #[inline(never)]
     pub(super) fn project(&mut self) {
         let (bodies, left) = (&mut self.bodies, &mut self.push_left);
         // Each marble moves at most one radius in all (see [`MAX_PROJECTION`]).
