@@ -96,21 +96,19 @@ pub(super) fn for_body_pairs(
     }
 }
 
-/// The candidate pairs ([`for_body_pairs`]) cut at `range` of their order (the kept
-/// candidates first, then `extra`).
+/// The kept candidates and the strays' pairs (`extra`) at `range` of their order, the
+/// kept ones first: a chunk of the candidate pairs.
 #[inline]
-fn for_body_pairs_in(
+fn cut<'a>(
     range: Range<usize>,
-    candidates: &[(u32, u32)],
-    extra: &[(u32, u32)],
-    strays: (&[bool], &[u32]),
-    local: Option<&[u32]>,
-    each: impl FnMut((u32, u32)),
-) {
+    candidates: &'a [(u32, u32)],
+    extra: &'a [(u32, u32)],
+) -> (&'a [(u32, u32)], &'a [(u32, u32)]) {
     let n = candidates.len();
-    let kept = &candidates[range.start.min(n)..range.end.min(n)];
-    let extra = &extra[range.start.saturating_sub(n)..range.end.saturating_sub(n)];
-    for_body_pairs(kept, extra, strays, local, each);
+    (
+        &candidates[range.start.min(n)..range.end.min(n)],
+        &extra[range.start.saturating_sub(n)..range.end.saturating_sub(n)],
+    )
 }
 
 /// [`for_body_pairs`] with `each` pushing what it finds of a pair onto a buffer, which is
@@ -133,9 +131,8 @@ pub(super) fn scan_body_pairs<T: Copy + Send>(
 ) {
     let total = candidates.len() + extra.len();
     grid::scan_chunked(total, parallel, chunks, out, |range, found| {
-        for_body_pairs_in(range, candidates, extra, strays, local, |pair| {
-            each(pair, found)
-        });
+        let (kept, extra) = cut(range, candidates, extra);
+        for_body_pairs(kept, extra, strays, local, |pair| each(pair, found));
     });
 }
 
@@ -151,34 +148,37 @@ pub(super) fn any_body_pair(
     test: impl Fn((u32, u32)) -> bool + Sync,
 ) -> bool {
     let total = candidates.len() + extra.len();
-    let pieces = crate::systems::pool_chunks::<Range<usize>>(total, parallel);
-    if pieces == 1 {
-        let mut pairs = candidate_pairs(candidates, extra, strays.0, strays.1);
-        return match local {
-            Some(local) => pairs
-                .map(|(i, j)| (local[i as usize], local[j as usize]))
-                .any(test),
-            None => pairs.any(test),
-        };
+    if crate::systems::pool_chunks::<Range<usize>>(total, parallel) == 1 {
+        return any_pair_in(0..total, candidates, extra, strays, local, test);
     }
     let found = AtomicBool::new(false);
-    crate::systems::run_rows(0..total, parallel, |range: Range<usize>| {
-        let n = candidates.len();
-        let kept = &candidates[range.start.min(n)..range.end.min(n)];
-        let extra = &extra[range.start.saturating_sub(n)..range.end.saturating_sub(n)];
-        let mut pairs = candidate_pairs(kept, extra, strays.0, strays.1);
-        let mut test = |pair| found.load(Ordering::Relaxed) || test(pair);
-        let any = match local {
-            Some(local) => pairs
-                .map(|(i, j)| (local[i as usize], local[j as usize]))
-                .any(&mut test),
-            None => pairs.any(&mut test),
-        };
-        if any {
+    crate::systems::run_rows(0..total, parallel, |range| {
+        let test = |pair| found.load(Ordering::Relaxed) || test(pair);
+        if any_pair_in(range, candidates, extra, strays, local, test) {
             found.store(true, Ordering::Relaxed);
         }
     });
     found.into_inner()
+}
+
+/// Whether `test` holds for any candidate pair at `range` of their order ([`cut`]).
+#[inline]
+fn any_pair_in(
+    range: Range<usize>,
+    candidates: &[(u32, u32)],
+    extra: &[(u32, u32)],
+    strays: (&[bool], &[u32]),
+    local: Option<&[u32]>,
+    test: impl FnMut((u32, u32)) -> bool,
+) -> bool {
+    let (kept, extra) = cut(range, candidates, extra);
+    let mut pairs = candidate_pairs(kept, extra, strays.0, strays.1);
+    match local {
+        Some(local) => pairs
+            .map(|(i, j)| (local[i as usize], local[j as usize]))
+            .any(test),
+        None => pairs.any(test),
+    }
 }
 
 /// The bodies are the marbles of the candidate pairs, not every marble, when those are
