@@ -715,28 +715,15 @@ impl PairSolver {
         self.changed.clear();
         self.changed.resize(n, false);
         // 2. The touching pairs, and the pairs that could close their gap this substep.
-        self.rows.clear();
-        let local = self.compact.then_some(self.local.as_slice());
-        let bodies = &self.bodies;
-        let strays = (self.stray.as_slice(), self.strays.as_slice());
-        scan_body_pairs(
-            &self.candidates,
-            &self.extra,
-            strays,
-            local,
-            self.on_pool,
-            &mut self.row_chunks,
-            &mut self.rows,
-            |(i, j), rows| {
-                if let Some(row) = narrow(bodies, i, j, p) {
-                    if row.kind == Found::Start {
-                        rows.push(row);
-                    }
-                } else if let Some(row) = near_row(bodies, i, j, p) {
+        self.scan_rows(|bodies, (i, j), rows| {
+            if let Some(row) = narrow(bodies, i, j, p) {
+                if row.kind == Found::Start {
                     rows.push(row);
                 }
-            },
-        );
+            } else if let Some(row) = near_row(bodies, i, j, p) {
+                rows.push(row);
+            }
+        });
         if self.rows.is_empty() {
             self.warm.clear();
             return false;
@@ -825,37 +812,45 @@ impl PairSolver {
         self.check_bodies();
         self.changed.clear();
         self.changed.resize(n, false);
-        self.rows.clear();
-        let bodies = &self.bodies;
-        let strays = (self.stray.as_slice(), self.strays.as_slice());
-        scan_body_pairs(
-            &self.candidates,
-            &self.extra,
-            strays,
-            None,
-            self.on_pool,
-            &mut self.row_chunks,
-            &mut self.rows,
-            |(i, j), rows| {
-                if let Some(mut row) = narrow(bodies, i, j, p) {
-                    if row.kind == Found::Impact && shallow(bodies, &row) {
-                        // An impact that leaves the pair overlapping by less than a small
-                        // share of the radius is left to the next substep's contact stage,
-                        // which judges it on the same closing speed; resolving it here
-                        // would move a settled pile for nothing.
-                        row.limit = f32::INFINITY;
-                    }
-                    if row.kind != Found::End {
-                        rows.push(row);
-                    }
+        self.scan_rows(|bodies, (i, j), rows| {
+            if let Some(mut row) = narrow(bodies, i, j, p) {
+                if row.kind == Found::Impact && shallow(bodies, &row) {
+                    // An impact that leaves the pair overlapping by less than a small share
+                    // of the radius is left to the next substep's contact stage, which
+                    // judges it on the same closing speed; resolving it here would move a
+                    // settled pile for nothing.
+                    row.limit = f32::INFINITY;
                 }
-            },
-        );
+                if row.kind != Found::End {
+                    rows.push(row);
+                }
+            }
+        });
         debug_assert!(
             self.rows
                 .iter()
                 .any(|row| row.kind == Found::Impact && row.limit != f32::INFINITY && row.u < 0.0),
             "the search before found a deep impact"
+        );
+    }
+
+    /// Makes `rows` what `each` finds of the candidate pairs (in the bodies' indices), in
+    /// their order: with `on_pool`, in chunks on the task pool
+    /// ([`scan_body_pairs`]).
+    fn scan_rows(&mut self, each: impl Fn(&[Body], (u32, u32), &mut Vec<Row>) + Sync) {
+        self.rows.clear();
+        let local = self.compact.then_some(self.local.as_slice());
+        let strays = (self.stray.as_slice(), self.strays.as_slice());
+        let bodies = self.bodies.as_slice();
+        scan_body_pairs(
+            &self.candidates,
+            &self.extra,
+            strays,
+            local,
+            self.on_pool,
+            &mut self.row_chunks,
+            &mut self.rows,
+            |pair, rows| each(bodies, pair, rows),
         );
     }
 
