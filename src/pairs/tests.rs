@@ -76,19 +76,11 @@ fn the_impact_screen_keeps_every_deep_impact() {
         };
         let towards = (-(u2 + 0.3 * u3)).normalize();
         let body = |x0: Vec3, x: Vec3, r: f32| Body {
-            entity: Entity::from_raw_u32(1).unwrap(),
-            x,
             x0,
             v: (x - x0) / p.h,
             v0: (x - x0) / p.h,
-            w: 1.0,
-            r,
-            e: 0.5,
-            a: Vec3::ZERO,
-            d: Vec3::ZERO,
-            omega: Vec3::ZERO,
-            spins: false,
             mu: 0.0,
+            ..resting(0, x, r)
         };
         let bodies = [body(x0a, x0a, ra), body(x0b, x0b + travel * towards, rb)];
         let kept = may_impact_deeply(&bodies, 0, 1, rounding_slack(&bodies));
@@ -203,8 +195,7 @@ fn grid_pairs_match_brute_force() {
 /// `parallel` feature), whose pairs are joined in the order of one walk.
 #[test]
 fn grid_pairs_keep_the_bucket_walk_order() {
-    #[cfg(feature = "parallel")]
-    bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
+    start_pool();
     let mut rnd = uniform(54321);
     let mut chunks = Vec::new();
     let (mut dense, mut pairs) = (0, 0);
@@ -336,8 +327,7 @@ fn kept_candidates_cover_every_overlapping_pair() {
 /// hundred of them).
 #[test]
 fn stray_pairs_found_in_chunks_keep_their_order() {
-    #[cfg(feature = "parallel")]
-    bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
+    start_pool();
     let mut uniform = uniform(7);
     let mut rnd = move || uniform() - 0.5;
     let r = 0.008;
@@ -380,8 +370,7 @@ fn stray_pairs_found_in_chunks_keep_their_order() {
 /// the same either way.
 #[test]
 fn candidate_pairs_scanned_in_chunks_keep_their_order() {
-    #[cfg(feature = "parallel")]
-    bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
+    start_pool();
     let mut uniform = uniform(11);
     let n = 2000;
     let mut pick = move || ((uniform() * n as f32) as u32).min(n as u32 - 1);
@@ -482,4 +471,10 @@ fn selected_bodies_give_the_bits_of_every_marble() {
     );
     assert_eq!(selected_contacts, every_contacts, "the same contacts");
     assert_eq!(selected, every, "the same positions and velocities");
+}
+
+/// Starts the task pool that the chunked searches run on (with the `parallel` feature).
+fn start_pool() {
+    #[cfg(feature = "parallel")]
+    bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
 }
