@@ -5,7 +5,7 @@ use bevy_ecs::schedule::{LogLevel, ScheduleBuildSettings, ScheduleLabel};
 
 use crate::config::{StepConfig, Substep};
 use crate::systems::{
-    board_detection, board_response, boards, events, forces, integrate, pairs, sleep, validate,
+    board_detection, board_response, boards, events, forces, pairs, sleep, validate,
 };
 use crate::validate::{InvalidValue, StepRefused};
 
@@ -35,10 +35,11 @@ pub enum MarbleSystems {
     /// Marble–marble pairs touching at the substep's start: collisions, friction, contact
     /// forces, overlap (only with `marble_collisions` on).
     PairContacts,
-    /// Free motion with the chosen integrator.
-    Integrate,
-    /// Marble–board touches (collision or contact), first impact, or end overlap; the
-    /// closed forms of a marble alone on one piece.
+    /// Each marble's start of the substep noted; marble–board touches (collision or
+    /// contact), first impact, or end overlap; the closed forms of a marble alone on one
+    /// piece; free motion with the chosen integrator for a marble no board touches or
+    /// reaches (one pass over the marbles' columns: the motion of the others is resolved
+    /// from their start, here or by the response).
     BoardDetection,
     /// Marble–board response: equation (1), contacts, continuous collision, position
     /// correction; spinning marbles' orientations turned.
@@ -92,7 +93,6 @@ pub fn substep_schedule() -> Schedule {
             MarbleSystems::Wake,
             MarbleSystems::AccumulateForces,
             MarbleSystems::PairContacts,
-            MarbleSystems::Integrate,
             MarbleSystems::BoardDetection,
             MarbleSystems::BoardResponse,
             MarbleSystems::PairImpacts,
@@ -126,7 +126,6 @@ pub fn substep_schedule() -> Schedule {
         pairs::pair_contacts
             .run_if(collisions)
             .in_set(MarbleSystems::PairContacts),
-        integrate::integrate.in_set(MarbleSystems::Integrate),
         (
             board_detection::detect_board_contacts,
             board_detection::detect_board_contacts_spinning,

@@ -5,6 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use bevy_ecs::prelude::*;
 
+use super::integrate::{FreeStep, move_freely, start_substep};
 use super::{
     BoardRows, BoardStaged, BoardStagedItem, Smooth, SpinStaged, SpinStagedItem, Stepped,
     smooth_material,
@@ -125,6 +126,8 @@ struct Stage<'a> {
     params: SubstepParams,
     /// The substep's length, s.
     h: f32,
+    /// Free motion over the substep, for the marbles no board touches or reaches.
+    free: FreeStep,
 }
 
 impl<'a> Stage<'a> {
@@ -135,6 +138,7 @@ impl<'a> Stage<'a> {
             flagged,
             params: SubstepParams::from_config(config, h),
             h,
+            free: (config.integrator, config.compensated, h),
         }
     }
 
@@ -163,11 +167,13 @@ impl<'a> Stage<'a> {
             m.velocity.into_inner(),
             spin.map(Mut::into_inner),
         );
-        let (mut contacts, mut more, mut near) = (m.contacts, m.more, m.near);
+        let (mut contacts, mut more, mut near, mut start) = (m.contacts, m.more, m.near, m.start);
+        let start = start.bypass_change_detection();
+        start_substep(motion.0, motion.1, motion.2, start);
         self.detect::<true>(
             touches,
             motion,
-            m.start,
+            start,
             m.acceleration,
             m.radius.0,
             material,
@@ -190,7 +196,7 @@ impl<'a> Stage<'a> {
             .iter_mut()
             .zip(t.carry.iter_mut())
             .zip(t.velocity.iter_mut())
-            .zip(t.start)
+            .zip(t.start.iter_mut())
             .zip(t.acceleration)
             .zip(t.radius)
             .zip(t.restitution)
@@ -198,6 +204,7 @@ impl<'a> Stage<'a> {
             .zip(t.more.iter_mut())
             .zip(t.near.iter_mut());
         for (((((((((x, carry), v), start), a), r), e), contacts), more), near) in rows {
+            start_substep(x, carry, v, start);
             self.detect::<false>(
                 &mut touches,
                 (x, carry, v, None),
@@ -267,6 +274,7 @@ impl<'a> Stage<'a> {
         let h = self.h;
         contacts.clear();
         if boards.is_empty() {
+            move_freely(self.free, start, acceleration, (position, carry, velocity));
             return;
         }
         let tol = touch_tolerance(config.contact_tolerance, r, start.position);
@@ -489,12 +497,15 @@ impl<'a> Stage<'a> {
             if let (Some(clear), [board]) = (clear, boards)
                 && path_is_clear(board, near_list, &path, h, r, tol, clear)
             {
+                move_freely(self.free, start, acceleration, (position, carry, velocity));
                 return;
             }
-            if let Some((tau, _)) = earliest_impact(boards, near, &path, h, r, tol, touches) {
-                self.flag(contacts, Pending::Impact(tau));
+            match earliest_impact(boards, near, &path, h, r, tol, touches) {
+                Some((tau, _)) => self.flag(contacts, Pending::Impact(tau)),
+                None => move_freely(self.free, start, acceleration, (position, carry, velocity)),
             }
         } else {
+            move_freely(self.free, start, acceleration, (position, carry, velocity));
             let tol_end = touch_tolerance(config.contact_tolerance, r, position.0);
             gather(
                 boards,

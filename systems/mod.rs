@@ -11,8 +11,7 @@
 //! | `Wake` | `sleep.rs` | on the first substep: wakes the sleeping marbles something reaches |
 //! | `AccumulateForces` | `forces.rs` | acceleration = gravity + force / mass |
 //! | `PairContacts` | `pairs.rs` | marble–marble pairs touching at the start: collisions, friction, contact forces, overlap (only with `marble_collisions`) |
-//! | `Integrate` | `integrate.rs` | free motion over the substep with the chosen integrator |
-//! | `BoardDetection` | `board_detection.rs` | marble–board touches at the start (collision or contact), else the first impact (CCD) or the end overlap; marbles resting, sliding or rolling on one piece with nothing else near are resolved here (in closed form on a still board, unless a spinning marble's friction event falls inside the substep; by the event loop on that touch otherwise) |
+//! | `BoardDetection` | `board_detection.rs`, `integrate.rs` | each marble's start noted; marble–board touches at the start (collision or contact), else the first impact (CCD) or the end overlap, a marble none touches or reaches moving freely with the chosen integrator; marbles resting, sliding or rolling on one piece with nothing else near are resolved here (in closed form on a still board, unless a spinning marble's friction event falls inside the substep; by the event loop on that touch otherwise) |
 //! | `BoardResponse` | `board_response.rs` | the marble–board event loop for the marbles detection flagged: equation (1), contacts, continuous collision; spinning marbles' orientations turned |
 //! | `PairImpacts` | `pairs.rs` | marble–marble pairs that meet inside the substep collide at their time of impact (only with `marble_collisions`) |
 //! | `Events` | `events.rs` | the substep's impacts become messages, its touching pairs are noted (only with `events`) |
@@ -47,7 +46,7 @@ pub struct BoardStaged {
     position: &'static mut Position,
     carry: &'static mut PositionCarry,
     velocity: &'static mut Velocity,
-    start: &'static StepStart,
+    start: &'static mut StepStart,
     acceleration: &'static Acceleration,
     radius: &'static Radius,
     restitution: &'static Restitution,
@@ -98,7 +97,7 @@ pub(crate) struct BoardRows<'a> {
     pub position: &'a mut [Position],
     pub carry: &'a mut [PositionCarry],
     pub velocity: &'a mut [Velocity],
-    pub start: &'a [StepStart],
+    pub start: &'a mut [StepStart],
     pub acceleration: &'a [Acceleration],
     pub radius: &'a [Radius],
     pub restitution: &'a [Restitution],
@@ -123,7 +122,7 @@ impl<'a> BoardRows<'a> {
             position: ContiguousMut::split(t.position).0,
             carry: ContiguousMut::split(t.carry).0,
             velocity: ContiguousMut::split(t.velocity).0,
-            start: t.start,
+            start: ContiguousMut::bypass_change_detection_split(t.start).0,
             acceleration: t.acceleration,
             radius: t.radius,
             restitution: t.restitution,
@@ -213,7 +212,7 @@ impl Rows for BoardRows<'_> {
         let (p0, p1) = self.position.split_at_mut(mid);
         let (c0, c1) = self.carry.split_at_mut(mid);
         let (v0, v1) = self.velocity.split_at_mut(mid);
-        let (s0, s1) = self.start.split_at(mid);
+        let (s0, s1) = self.start.split_at_mut(mid);
         let (a0, a1) = self.acceleration.split_at(mid);
         let (r0, r1) = self.radius.split_at(mid);
         let (e0, e1) = self.restitution.split_at(mid);
