@@ -1,6 +1,6 @@
 //! Free motion over the substep with the chosen integrator, as the marble–board
-//! detection stage applies it: each marble's start is noted ([`start_substep`]), and a
-//! marble that no board touches or reaches moves freely ([`move_freely`]). Detection
+//! detection stage applies it: each marble's start is noted (`start_substep`), and a
+//! marble that no board touches or reaches moves freely (`move_freely`). Detection
 //! resolves the others from that start (the closed forms), or the response does, so
 //! their free motion is never computed; one pass over the columns does both.
 

@@ -371,7 +371,7 @@ pub mod board_response;
 pub mod boards;
 pub mod events;
 pub mod forces;
-pub mod integrate;
+pub(crate) mod integrate;
 pub mod pairs;
 pub mod sleep;
 pub mod validate;
