@@ -23,23 +23,21 @@ const FACE_SKIN: f32 = 16.0;
 /// same spot of the board. Queries the list does not cover search the board, and
 /// detection rebuilds a list that no longer covers the substep's start. The pieces are kept
 /// in the order a search visits them, so a query gives the same bits either way.
+///
+/// Laid out for the commonest query, a marble on a still flat face
+/// ([`NearPieces::still_face`]): what it reads (the length, board, epoch, radius, the
+/// face, the anchor in the world, the reach and the first piece) fills the first 64 bytes,
+/// and the list is aligned to them, so that the query reads one cache line of it.
 #[derive(Component, Clone, Copy, Debug)]
+#[repr(C, align(64))]
 pub struct NearPieces {
-    pieces: [PieceId; NEAR_MAX],
     len: u8,
-    /// Index of the board in [`BoardCache::boards`]; `u32::MAX`: no list.
-    board: u32,
+    /// Index of the board in [`BoardCache::boards`]; [`NO_LIST`]: no list.
+    board: u16,
     /// The [`BoardCache::epoch`] it was built in.
     epoch: u32,
     /// The radius it was built for.
     radius: f32,
-    /// Centre when built, board frame.
-    anchor: Vec3,
-    /// Every piece of the board closer than this to the anchor (distance minus radius) is
-    /// listed.
-    reach: f32,
-    /// Centre when built, world.
-    anchor_world: Vec3,
     /// The board's [`BoardSnapshot::pose_version`] when built: while it is the same, the
     /// board has not moved and the list can be tested in the world frame.
     pose_version: u32,
@@ -47,19 +45,31 @@ pub struct NearPieces {
     /// normal (world; zero otherwise) and the anchor's gap to it.
     face_normal: Vec3,
     face_gap: f32,
-    /// Each listed piece's gap from the anchor (distance minus radius) when built.
-    gaps: [f32; NEAR_MAX],
+    /// Centre when built, world.
+    anchor_world: Vec3,
+    /// Every piece of the board closer than this to the anchor (distance minus radius) is
+    /// listed.
+    reach: f32,
     /// The anchor's gap to the nearest piece of the board (the listed gaps, and the reach
     /// for the rest), less a margin for rounding: [`NearPieces::clearance`] at the anchor.
     clear: f32,
+    pieces: [PieceId; NEAR_MAX],
+    /// Centre when built, board frame.
+    anchor: Vec3,
+    /// Each listed piece's gap from the anchor (distance minus radius) when built.
+    gaps: [f32; NEAR_MAX],
 }
+
+/// [`NearPieces::board`] of no list. A board at this index or beyond gets no list (its
+/// queries search it; piece identifiers hold 16 bits of the board's index).
+const NO_LIST: u16 = u16::MAX;
 
 impl Default for NearPieces {
     fn default() -> Self {
         NearPieces {
             pieces: [PieceId::NONE; NEAR_MAX],
             len: 0,
-            board: u32::MAX,
+            board: NO_LIST,
             epoch: 0,
             radius: 0.0,
             anchor: Vec3::ZERO,
@@ -122,7 +132,7 @@ impl NearPieces {
     /// centres within `spread` of `x` (world, at the substep's start) for touches within
     /// `tol`.
     pub fn is_fresh(&self, cache: &BoardCache, x: Vec3, r: f32, spread: f32, tol: f32) -> bool {
-        if self.board == u32::MAX || self.epoch != cache.epoch || self.radius != r {
+        if self.board == NO_LIST || self.epoch != cache.epoch || self.radius != r {
             return false;
         }
         let Some(b) = cache.boards.get(self.board as usize) else {
@@ -458,6 +468,9 @@ impl NearPieces {
         // and the smallest gap left out.
         let mut best: Option<(f32, Candidates)> = None;
         for (bi, b) in cache.boards.iter().enumerate() {
+            let Some(index) = u16::try_from(bi).ok().filter(|&i| i != NO_LIST) else {
+                break;
+            };
             if let Some(a) = &b.swept_aabb
                 && !overlaps(a, &world)
             {
@@ -479,7 +492,7 @@ impl NearPieces {
                 });
             let nearest = found.nearest();
             if best.as_ref().is_none_or(|(g, _)| nearest < *g) {
-                self.board = bi as u32;
+                self.board = index;
                 self.anchor = local;
                 self.pose_version = b.pose_version;
                 best = Some((nearest, found));
