@@ -418,8 +418,8 @@ impl Default for Friction {
 }
 
 /// A marble's state at the start of the current substep, before forces were integrated.
-/// Written by the detection stage before anything moves; detection measures closing speeds
-/// against it.
+/// Written by the detection stage as it starts (after the pair contact stage's changes);
+/// detection measures closing speeds against it.
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepStart {
     /// Centre at the start of the substep, m.

@@ -38,8 +38,8 @@ pub enum MarbleSystems {
     /// Each marble's start of the substep noted; marble–board touches (collision or
     /// contact), first impact, or end overlap; the closed forms of a marble alone on one
     /// piece; free motion with the chosen integrator for a marble no board touches or
-    /// reaches (one pass over the marbles' columns: the motion of the others is resolved
-    /// from their start, here or by the response).
+    /// reaches (one pass over the marbles' columns: the others are moved from their start,
+    /// here or by the response).
     BoardDetection,
     /// Marble–board response: equation (1), contacts, continuous collision, position
     /// correction; spinning marbles' orientations turned.

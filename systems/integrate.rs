@@ -2,7 +2,9 @@
 //! detection stage applies it: each marble's start is noted (`start_substep`), and a
 //! marble that no board touches or reaches moves freely (`move_freely`). Detection
 //! resolves the others from that start (the closed forms), or the response does, so
-//! their free motion is never computed; one pass over the columns does both.
+//! with continuous collision their free motion is never computed (without it, a marble
+//! touching nothing at the start moves freely first: its end is what detection checks
+//! for overlap). One pass over the columns does both.
 
 use crate::components::{
     Acceleration, Position, PositionCarry, StepStart, Velocity, compensated_add,

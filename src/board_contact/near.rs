@@ -103,7 +103,7 @@ impl NearPieces {
     /// The list for board `board`, if this is it.
     #[inline]
     pub(super) fn of(near: Option<&NearPieces>, board: usize) -> Option<&NearPieces> {
-        near.filter(|l| l.board as usize == board)
+        near.filter(|l| l.board != NO_LIST && l.board as usize == board)
     }
 
     /// True when every piece within `gap` of some centre within `spread` of `centre` (board
