@@ -3,8 +3,9 @@
 //! A marble with a non-finite or out-of-range [`Position`] or [`Velocity`], a non-finite
 //! [`Force`] or spin, a [`Radius`] or [`Mass`] that is not finite and > 0, a
 //! [`Restitution`] outside [0, 1], or a negative or non-finite [`Friction`], rolling
-//! resistance or spin damping, and a board with a non-finite or out-of-range pose or
-//! velocity, gets [`Quarantined`](crate::components::Quarantined) at the start of the next step (stage `Validate`): it is
+//! resistance or spin damping, a marble from which the program removed a component the
+//! stages read (one that [`Marble`](crate::components::Marble) requires, reported as
+//! `missing`), and a board with a non-finite or out-of-range pose or velocity, gets [`Quarantined`](crate::components::Quarantined) at the start of the next step (stage `Validate`): it is
 //! left where it is and out of every stage, and a [`QuarantineReport`] message and a log
 //! warning name the entity, the component and the value. The rest of the world steps as if
 //! it were not there. Scene files are refused with the same rules before anything runs

@@ -5,9 +5,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use bevy_ecs::prelude::*;
 use glam::Vec3;
 
+use crate::board_contact::NearPieces;
 use crate::components::{
-    AngularVelocity, Board, Force, Friction, Marble, Mass, Position, Quarantined, Radius,
-    Restitution, RollingResistance, Rotation, SpinDamping, Velocity,
+    Acceleration, AngularVelocity, Board, Contacts, Force, Friction, Marble, Mass, MoreContacts,
+    Position, PositionCarry, Quarantined, Radius, Restitution, RollingResistance, Rotation,
+    SpinDamping, StepStart, Velocity,
 };
 use crate::sleep::Sleeping;
 use crate::validate::{
@@ -88,7 +90,23 @@ pub fn validate(
         ),
         (With<Board>, Without<Quarantined>),
     >,
+    incomplete: Query<
+        (Entity, Present),
+        (With<Marble>, Without<Quarantined>, Without<Sleeping>, Lacks),
+    >,
 ) {
+    // A marble without a component the stages read (removed by the program: `Marble`
+    // requires them all) would be stepped by none of them; it is quarantined like a bad
+    // value. Matched by archetype: a world with none costs nothing here.
+    for (marble, present) in &incomplete {
+        let component = missing_component(present).unwrap_or("Marble");
+        let reason = InvalidValue {
+            component,
+            rule: "present on every marble",
+            value: "missing".to_string(),
+        };
+        quarantine(&mut commands, &mut reports, marble, reason);
+    }
     // The common case in one pass of integer comparisons on the values' bits over each
     // table's columns (which the compiler vectorizes); only a table holding a marble that
     // fails is looked at again, for that marble's first bad value.
@@ -175,6 +193,74 @@ pub fn validate(
             quarantine(&mut commands, &mut reports, entity, reason);
         }
     }
+}
+
+/// The marbles lacking any component a stage reads.
+type Lacks = Or<(
+    Without<Position>,
+    Without<Velocity>,
+    Without<Force>,
+    Without<Radius>,
+    Without<Mass>,
+    Without<Restitution>,
+    Without<Friction>,
+    Without<Acceleration>,
+    Without<PositionCarry>,
+    Without<StepStart>,
+    Without<Contacts>,
+    Without<MoreContacts>,
+    Without<NearPieces>,
+)>;
+
+/// Whether a marble has each component of [`Lacks`], in its order.
+type Present = (
+    (
+        Has<Position>,
+        Has<Velocity>,
+        Has<Force>,
+        Has<Radius>,
+        Has<Mass>,
+    ),
+    (
+        Has<Restitution>,
+        Has<Friction>,
+        Has<Acceleration>,
+        Has<PositionCarry>,
+    ),
+    (
+        Has<StepStart>,
+        Has<Contacts>,
+        Has<MoreContacts>,
+        Has<NearPieces>,
+    ),
+);
+
+/// The name of the first component of [`Lacks`] that a marble lacks (`present`: whether
+/// it has each).
+fn missing_component(
+    ((x, v, f, r, m), (e, mu, a, carry), (start, contacts, more, near)): (
+        (bool, bool, bool, bool, bool),
+        (bool, bool, bool, bool),
+        (bool, bool, bool, bool),
+    ),
+) -> Option<&'static str> {
+    [
+        ("Position", x),
+        ("Velocity", v),
+        ("Force", f),
+        ("Radius", r),
+        ("Mass", m),
+        ("Restitution", e),
+        ("Friction", mu),
+        ("Acceleration", a),
+        ("PositionCarry", carry),
+        ("StepStart", start),
+        ("Contacts", contacts),
+        ("MoreContacts", more),
+        ("NearPieces", near),
+    ]
+    .into_iter()
+    .find_map(|(name, has)| (!has).then_some(name))
 }
 
 /// The bits of `f32::MAX`. A float's bits, read as an unsigned integer, order the

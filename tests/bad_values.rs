@@ -167,6 +167,70 @@ fn every_bad_marble_value_is_quarantined_where_it_is() {
     }
 }
 
+/// A marble whose program removed a component the stages read (`Marble` requires them
+/// all) is quarantined where it is and reported as missing that component, and the good
+/// marble steps bit for bit as without it; before, no stage would have moved it.
+#[test]
+fn a_marble_missing_a_component_is_quarantined_where_it_is() {
+    let mut alone = world();
+    for _ in 0..30 {
+        alone.step();
+    }
+    let want = alone.marble_state(0);
+    let at = Vec3::new(1.0, 0.3, 0.0);
+    type Remove = fn(&mut bevy_ecs::world::EntityWorldMut);
+    let cases: [(&str, Remove); 7] = [
+        ("Velocity", |e| {
+            e.remove::<Velocity>();
+        }),
+        ("Radius", |e| {
+            e.remove::<Radius>();
+        }),
+        ("Restitution", |e| {
+            e.remove::<Restitution>();
+        }),
+        ("Friction", |e| {
+            e.remove::<Friction>();
+        }),
+        ("Acceleration", |e| {
+            e.remove::<bevy_marble::components::Acceleration>();
+        }),
+        ("Contacts", |e| {
+            e.remove::<bevy_marble::components::Contacts>();
+        }),
+        ("NearPieces", |e| {
+            e.remove::<bevy_marble::board_contact::NearPieces>();
+        }),
+    ];
+    for (component, remove) in cases {
+        let mut sim = world();
+        let bad = sim.world_mut().spawn((Marble, Position(at))).id();
+        remove(&mut sim.world_mut().entity_mut(bad));
+        let r = step(&mut sim, 30);
+        let w = sim.world();
+        assert!(
+            w.get::<Quarantined>(bad).is_some(),
+            "{component}: not quarantined"
+        );
+        assert_eq!(
+            w.get::<Position>(bad).unwrap().0,
+            at,
+            "{component}: it moved"
+        );
+        assert_eq!(r.len(), 1, "{component}: {r:?}");
+        assert_eq!((r[0].entity, r[0].reason.component), (bad, component));
+        assert_eq!(
+            r[0].reason.to_string(),
+            format!("{component} must be present on every marble, got missing")
+        );
+        assert_eq!(
+            sim.marble_state(0),
+            want,
+            "{component}: the good marble changed"
+        );
+    }
+}
+
 /// A value spoiled later (a program setting a radius of −0.01 m after ten steps) is caught
 /// at the next step: the marble stops where it was, and the message and a log warning say
 /// what and why.
