@@ -58,6 +58,39 @@ fn step(sim: &mut Simulation, n: usize) -> Vec<QuarantineReport> {
     out
 }
 
+/// A second marble spawned at `at` beside [`world`]'s and spoiled by `spoil`, stepped 30
+/// times: it is quarantined where it is, reported once for `component`, and the good
+/// marble ends in `want` (its state stepped alone). Returns the report.
+fn quarantined_where_it_is(
+    component: &str,
+    spoil: impl Fn(&mut bevy_ecs::world::EntityWorldMut),
+    at: Vec3,
+    want: (Vec3, Vec3),
+) -> QuarantineReport {
+    let mut sim = world();
+    let bad = sim.world_mut().spawn((Marble, Position(at))).id();
+    spoil(&mut sim.world_mut().entity_mut(bad));
+    let r = step(&mut sim, 30);
+    let w = sim.world();
+    assert!(
+        w.get::<Quarantined>(bad).is_some(),
+        "{component}: not quarantined"
+    );
+    assert_eq!(
+        w.get::<Position>(bad).unwrap().0,
+        at,
+        "{component}: it moved"
+    );
+    assert_eq!(r.len(), 1, "{component}: {r:?}");
+    assert_eq!((r[0].entity, r[0].reason.component), (bad, component));
+    assert_eq!(
+        sim.marble_state(0),
+        want,
+        "{component}: the good marble changed"
+    );
+    r[0].clone()
+}
+
 /// Each bad value, inserted by the Rust API on a second marble: quarantined before it
 /// moves, reported with its component, and the good marble's state is bit for bit what it
 /// is without the bad one.
@@ -126,27 +159,7 @@ fn every_bad_marble_value_is_quarantined_where_it_is() {
         ),
     ];
     for (component, spoil) in cases {
-        let mut sim = world();
-        let bad = sim.world_mut().spawn((Marble, Position(at))).id();
-        spoil(&mut sim.world_mut().entity_mut(bad));
-        let r = step(&mut sim, 30);
-        let w = sim.world();
-        assert!(
-            w.get::<Quarantined>(bad).is_some(),
-            "{component}: not quarantined"
-        );
-        assert_eq!(
-            w.get::<Position>(bad).unwrap().0,
-            at,
-            "{component}: it moved"
-        );
-        assert_eq!(r.len(), 1, "{component}: {r:?}");
-        assert_eq!((r[0].entity, r[0].reason.component), (bad, component));
-        assert_eq!(
-            sim.marble_state(0),
-            want,
-            "{component}: the good marble changed"
-        );
+        quarantined_where_it_is(component, spoil, at, want);
     }
     // A non-finite position and one beyond the supported range stay where they are too.
     for p in [Vec3::new(f32::NAN, 0.0, 0.0), Vec3::new(-1e38, 0.5, 0.0)] {
@@ -203,30 +216,10 @@ fn a_marble_missing_a_component_is_quarantined_where_it_is() {
         }),
     ];
     for (component, remove) in cases {
-        let mut sim = world();
-        let bad = sim.world_mut().spawn((Marble, Position(at))).id();
-        remove(&mut sim.world_mut().entity_mut(bad));
-        let r = step(&mut sim, 30);
-        let w = sim.world();
-        assert!(
-            w.get::<Quarantined>(bad).is_some(),
-            "{component}: not quarantined"
-        );
+        let r = quarantined_where_it_is(component, remove, at, want);
         assert_eq!(
-            w.get::<Position>(bad).unwrap().0,
-            at,
-            "{component}: it moved"
-        );
-        assert_eq!(r.len(), 1, "{component}: {r:?}");
-        assert_eq!((r[0].entity, r[0].reason.component), (bad, component));
-        assert_eq!(
-            r[0].reason.to_string(),
+            r.reason.to_string(),
             format!("{component} must be present on every marble, got missing")
-        );
-        assert_eq!(
-            sim.marble_state(0),
-            want,
-            "{component}: the good marble changed"
         );
     }
 }
