@@ -105,32 +105,35 @@ pub fn earliest_impact(
         {
             continue;
         }
-        // Everything the marble can reach this substep, in the board's frame; a moving
-        // board sees it through both end poses and, if it turns, a margin for the turn.
+        // Where the centre can be this substep, in the board's frame (for the flat-face
+        // bound); a moving board sees it through both end poses and, if it turns, a margin
+        // for the turn. Everything the marble can reach, the same way, bounds the board's
+        // search where the list does not cover the path.
         let to_start = AabbTransform::new(q0.conjugate() * -c0, q0.conjugate());
-        let mut query = to_start.apply(&world);
-        let mut centre_query = to_start.apply(&centres);
-        if moving {
+        let to_end = moving.then(|| {
             let (c1, q1) = b.pose_at(path.t0 + span);
-            let to_end = AabbTransform::new(q1.conjugate() * -c1, q1.conjugate());
-            let q_end = to_end.apply(&world);
-            query = Aabb::new(query.mins.min(q_end.mins), query.maxs.max(q_end.maxs));
-            let c_end = to_end.apply(&centres);
-            centre_query = Aabb::new(
-                centre_query.mins.min(c_end.mins),
-                centre_query.maxs.max(c_end.maxs),
-            );
+            AabbTransform::new(q1.conjugate() * -c1, q1.conjugate())
+        });
+        let turn = if moving {
             let far = (path.x - c0).length() + (marble_speed + b.velocity.length()) * span;
-            let turn = w * span * far;
-            query = Aabb::new(
-                query.mins - Vec3::splat(turn),
-                query.maxs + Vec3::splat(turn),
-            );
-            centre_query = Aabb::new(
-                centre_query.mins - Vec3::splat(turn),
-                centre_query.maxs + Vec3::splat(turn),
-            );
-        }
+            w * span * far
+        } else {
+            0.0
+        };
+        let board_frame = |a: &Aabb| {
+            let start = to_start.apply(a);
+            match &to_end {
+                Some(to_end) => {
+                    let end = to_end.apply(a);
+                    Aabb::new(
+                        start.mins.min(end.mins) - Vec3::splat(turn),
+                        start.maxs.max(end.maxs) + Vec3::splat(turn),
+                    )
+                }
+                None => start,
+            }
+        };
+        let centre_query = board_frame(&centres);
         let limit = best.map_or(span, |(t, _)| t);
         let each = |part: usize, sub: u32, piece: &Piece| {
             if touching.contains(PieceId::new(bi, part, sub)) {
@@ -194,7 +197,7 @@ pub fn earliest_impact(
         };
         match list {
             Some(l) if covered => l.visit(&b.geometry, each),
-            _ => b.geometry.for_each_piece(&query, each),
+            _ => b.geometry.for_each_piece(&board_frame(&world), each),
         }
     }
     best
