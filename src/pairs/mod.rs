@@ -361,8 +361,19 @@ pub struct PairSolver {
     warm_next: KeyMap,
     /// Velocities and inverse masses in the passes.
     vel: Vec<Vel>,
-    /// Projection each marble may still move this substep.
-    push_left: Vec<f32>,
+    /// The projection's centres (and what each marble may still move), radii and
+    /// inverse masses.
+    centres: Vec<project::Centre>,
+    sizes: Vec<project::Size>,
+    /// The projection's order of the pair rows ([`PairSolver::order_pushes`]): one more
+    /// than each marble's latest level, each row's level, where each level ends in
+    /// `push_order`, the rows by level (indices of `pair_gs`), and each level's rows by
+    /// four.
+    push_last: Vec<u32>,
+    push_level: Vec<u32>,
+    push_first: Vec<u32>,
+    push_order: Vec<u32>,
+    push_blocks: Vec<project::PushBlock>,
     pair_gs: Vec<PairGs>,
     /// The pair rows in the order the passes visit them (by colour: no two rows of a
     /// colour share a marble), and each row's slot there.
@@ -963,7 +974,14 @@ impl PairSolver {
         self.colours.reserve(n);
         self.board_gs.reserve(touches);
         self.vel.reserve(n);
-        self.push_left.reserve(n);
+        self.centres.reserve(n);
+        self.sizes.reserve(n);
+        self.push_last.reserve(n);
+        self.push_level.reserve(pairs);
+        // (At most a level a row, a level's end kept for each.)
+        self.push_first.reserve(pairs + 1);
+        self.push_order.reserve(pairs);
+        self.push_blocks.reserve(pairs / 4);
         self.warm.reserve(pairs + touches);
         self.warm_next.reserve(pairs + touches);
         self.board_touches.reserve(touches);

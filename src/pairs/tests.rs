@@ -1,5 +1,6 @@
 use super::candidates::{candidate_pairs, for_body_pairs};
 use super::late::LateSearch;
+use super::project::{Centre, PushBlock, Size, project_block, project_pair};
 use super::*;
 
 /// The grid reports exactly the pairs whose bound spheres overlap, each once, for
@@ -139,6 +140,139 @@ fn row_blocks_are_four_single_rows() {
         let lambdas = rows_one.map(|r| r.lambda.to_bits());
         assert_eq!(lambdas, block.lambda.to_array().map(f32::to_bits));
         assert_eq!(largest.to_bits(), wide.max_element().to_bits());
+    }
+}
+
+/// The projection's blocks of four rows push each pair exactly as its row alone does, one
+/// after another: random pairs overlapping by up to a third of their radii or apart,
+/// some coincident, some marbles with nothing left to move, bit for bit (centres, what is
+/// left of each marble's move, which marbles changed), and whether anything moved.
+#[test]
+fn projection_blocks_are_four_single_rows() {
+    let mut uniform = uniform(0x85eb_ca6b);
+    let mut rnd = move || uniform() * 2.0 - 1.0;
+    let (mut pushed, mut still) = (0, 0);
+    for case in 0..2000 {
+        let sizes: Vec<Size> = (0..8)
+            .map(|_| {
+                Vec4::new(
+                    0.01 + 0.01 * rnd().abs(),
+                    1.0 / (0.01 + rnd().abs()),
+                    0.0,
+                    0.0,
+                )
+            })
+            .collect();
+        let mut centres: Vec<Centre> = vec![Vec4::ZERO; 8];
+        // Marbles 0..4 against 4..8 in a shuffled order: no two rows share a marble.
+        let pairs: [(usize, usize); 4] = std::array::from_fn(|k| (k, 4 + (k + 1) % 4));
+        for &(i, j) in &pairs {
+            let left = |r: f32, x: f32| if x > 0.6 { 0.0 } else { r * x.abs() };
+            let x = Vec3::new(rnd(), rnd(), rnd());
+            let reach = sizes[i].x + sizes[j].x;
+            let apart = Vec3::new(rnd(), rnd(), rnd()).normalize() * reach * (1.0 - 0.35 * rnd());
+            let y = if case % 97 == 0 { x } else { x + apart };
+            centres[i] = x.extend(left(sizes[i].x, rnd()));
+            centres[j] = y.extend(left(sizes[j].x, rnd()));
+        }
+        let rows: [PairGs; 4] = pairs.map(|(i, j)| PairGs {
+            i: i as u32,
+            j: j as u32,
+            n: Vec3::new(rnd(), rnd(), rnd()).normalize(),
+            k: 1.0 / (sizes[i].y + sizes[j].y),
+            lambda: 0.0,
+            target: 0.0,
+        });
+        let (mut one, mut changed_one, mut moved_one) = (centres.clone(), [false; 8], false);
+        for r in &rows {
+            moved_one |= project_pair(r, &mut one, &sizes, &mut changed_one);
+        }
+        let (mut four, mut changed_four) = (centres.clone(), [false; 8]);
+        let block = PushBlock::new(rows.each_ref());
+        let moved_four = project_block(&block, &mut four, &sizes, &mut changed_four);
+        let bits = |v: &[Centre]| {
+            v.iter()
+                .map(|v| v.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&one), bits(&four), "case {case}");
+        assert_eq!(changed_one, changed_four, "case {case}");
+        assert_eq!(moved_one, moved_four, "case {case}");
+        if moved_one {
+            pushed += 1;
+        } else {
+            still += 1;
+        }
+    }
+    assert!(
+        pushed > 500 && still > 100,
+        "{pushed} pushed, {still} still"
+    );
+}
+
+/// The projection's order of the pair rows ([`PairSolver::order_pushes`]) takes every
+/// row once, never puts two rows of a marble in one level (so a block's lanes share no
+/// marble), and keeps each marble's rows in their order: random rows over a few marbles
+/// (long chains through each) and over many (wide levels).
+#[test]
+fn projection_order_keeps_each_marbles_rows_in_order() {
+    let mut uniform = uniform(0x27d4_eb2f);
+    for (marbles, rows) in [(6, 40), (60, 400), (2000, 6000)] {
+        let mut solver = PairSolver {
+            bodies: (0..marbles).map(|k| resting(k, Vec3::ZERO, 0.01)).collect(),
+            pair_gs: (0..rows)
+                .map(|_| {
+                    let i = (uniform() * marbles as f32) as u32 % marbles as u32;
+                    let j = (i + 1 + (uniform() * (marbles - 1) as f32) as u32) % marbles as u32;
+                    PairGs {
+                        i: i.min(j),
+                        j: i.max(j),
+                        n: Vec3::Y,
+                        k: 0.5,
+                        lambda: 0.0,
+                        target: 0.0,
+                    }
+                })
+                .collect(),
+            ..PairSolver::default()
+        };
+        solver.order_pushes();
+        let mut placed = Vec::new();
+        let (mut from, mut blocks) = (0, solver.push_blocks.iter());
+        for &to in &solver.push_first {
+            let of_level = &solver.push_order[from..to as usize];
+            let wide = of_level.len() / 4 * 4;
+            let mut level: Vec<(u32, u32)> = blocks
+                .by_ref()
+                .take(wide / 4)
+                .flat_map(|b| (0..4).map(|l| (b.i[l], b.j[l])))
+                .collect();
+            level.extend(of_level[wide..].iter().map(|&k| {
+                let r = &solver.pair_gs[k as usize];
+                (r.i, r.j)
+            }));
+            let mut seen: Vec<u32> = level.iter().flat_map(|&(i, j)| [i, j]).collect();
+            seen.sort_unstable();
+            assert!(
+                seen.windows(2).all(|w| w[0] != w[1]),
+                "a level shares a marble ({marbles} marbles)"
+            );
+            placed.extend(level);
+            from = to as usize;
+        }
+        assert!(blocks.next().is_none(), "every block in a level");
+        assert_eq!(placed.len(), rows, "every row once");
+        for m in 0..marbles as u32 {
+            let own = |list: &mut dyn Iterator<Item = (u32, u32)>| {
+                list.filter(|&(i, j)| i == m || j == m).collect::<Vec<_>>()
+            };
+            let mut order = solver.pair_gs.iter().map(|r| (r.i, r.j));
+            assert_eq!(
+                own(&mut placed.iter().copied()),
+                own(&mut order),
+                "marble {m}'s rows out of order"
+            );
+        }
     }
 }
 
