@@ -73,7 +73,7 @@ use narrow::{
     deep_impact, late_row, late_touch, may_impact_deeply, narrow, near_row, rounding_slack, shallow,
 };
 use rows::{BoardGs, ColourSpan, PairGs, RowBlock, Vel, accumulate, larger};
-use solve::Constraint;
+use solve::BoardPush;
 
 /// Overlap left alone by the position projection, as a fraction of the smaller radius.
 pub const PAIR_SLOP: f32 = 2e-3;
@@ -355,7 +355,11 @@ pub struct PairSolver {
     queue: Vec<u32>,
     first: Vec<u32>,
     /// Contact stage.
-    constraints: Vec<Constraint>,
+    /// The rows' warm-start keys (beside `pair_gs` and `board_gs`), and the board rows
+    /// of the projection.
+    pair_keys: Vec<(u64, u64)>,
+    board_keys: Vec<(u64, u64)>,
+    board_push: Vec<BoardPush>,
     in_contact: Vec<bool>,
     warm: KeyMap,
     warm_next: KeyMap,
@@ -964,7 +968,9 @@ impl PairSolver {
         self.first.reserve(n);
         self.adjacency.reserve(2 * pairs);
         self.queue.reserve(pairs);
-        self.constraints.reserve(pairs + touches);
+        self.pair_keys.reserve(pairs);
+        self.board_keys.reserve(touches);
+        self.board_push.reserve(touches);
         self.pair_gs.reserve(pairs);
         self.pair_pass.reserve(pairs);
         self.pair_slot.reserve(pairs);

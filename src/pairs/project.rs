@@ -49,7 +49,8 @@ impl PushBlock {
 
 impl PairSolver {
     /// Step 5 of [`crate::pairs`]: overlap beyond the slop out of positions, in passes
-    /// over the pair rows and then the board rows, each in the order of `constraints`.
+    /// over the pair rows and then the board rows, each in the order of the contact
+    /// passes' rows (`pair_gs`, `board_push`).
     /// In a pile nearly every pair row pushes in every pass (a settled 10,000-marble pour
     /// at the pile bar: 24,000 of its 33,000 rows, in each of the four), and the order
     /// matters: a pass in the rows' order sweeps the pile, one taken colour by colour
@@ -59,12 +60,6 @@ impl PairSolver {
     // Out of line: see `PairSolver::run_passes`.
     #[inline(never)]
     pub(super) fn project(&mut self) {
-        let pairs = self.pair_gs.len();
-        debug_assert!(
-            self.constraints[..pairs].iter().all(|c| c.j != u32::MAX)
-                && self.constraints[pairs..].iter().all(|c| c.j == u32::MAX),
-            "the pair rows first, in the order of `pair_gs`"
-        );
         self.order_pushes();
         let (centres, sizes) = (&mut self.centres, &mut self.sizes);
         // Each marble moves at most one radius in all (see [`MAX_PROJECTION`]).
@@ -88,7 +83,7 @@ impl PairSolver {
                 }
                 from = to as usize;
             }
-            for c in &self.constraints[pairs..] {
+            for c in &self.board_push {
                 let i = c.i as usize;
                 let (x, left, r) = (centres[i].truncate(), centres[i].w, sizes[i].x);
                 let gap = (x - c.p).dot(c.n) - r;
@@ -188,7 +183,7 @@ pub(super) fn project_pair(
     let d = b.truncate() - a.truncate();
     let dist = d.length();
     let gap = dist - ra - rb;
-    // As the row's own slop (`Constraint::slop`).
+    // The pair's allowed overlap (0.2% of the smaller radius).
     let slop = PAIR_SLOP * ra.min(rb);
     if gap < -slop {
         let n = if dist > 0.0 { d / dist } else { row.n };

@@ -29,7 +29,7 @@ pub(super) fn larger(a: f32, x: f32) -> f32 {
     if x > a { x } else { a }
 }
 
-/// A pair row of the contact passes (compact copy of a [`Constraint`]).
+/// A pair row of the contact passes.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct PairGs {
     pub(super) i: u32,
@@ -159,7 +159,7 @@ pub(super) struct ColourSpan {
     pub(super) tail: (u32, u32),
 }
 
-/// A board row of the contact passes (compact copy of a [`Constraint`]).
+/// A board row of the contact passes.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct BoardGs {
     pub(super) i: u32,

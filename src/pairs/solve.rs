@@ -12,28 +12,14 @@ use super::*;
 /// cut by a tolerance.
 pub(super) const CONVERGED: f32 = 1e-6;
 
-/// A contact row of the velocity solver: a pair or a marble on a board.
+/// A board row of the overlap projection: the marble, the contact point at the end of the
+/// substep, the board's normal there, and the overlap allowed before projection, m.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Constraint {
+pub(super) struct BoardPush {
     pub(super) i: u32,
-    /// The other marble, or `u32::MAX` for a board.
-    pub(super) j: u32,
-    pub(super) n: Vec3,
-    /// Board: velocity of the board's surface point. Pair: unused.
-    pub(super) vb: Vec3,
-    /// Board: the contact point at the end of the substep. Pair: unused.
     pub(super) p: Vec3,
-    /// Effective mass `1 / (w_i + w_j)` (`1 / w_i` for a board).
-    pub(super) k: f32,
-    /// Accumulated impulse, N·s.
-    pub(super) lambda: f32,
-    /// Overlap allowed before projection, m.
+    pub(super) n: Vec3,
     pub(super) slop: f32,
-    /// Least closing speed the row allows at the end of the substep, m/s: zero, or for a
-    /// speculative row, the speed that closes its gap over the substep.
-    pub(super) target: f32,
-    /// Warm-start key.
-    pub(super) key: (u64, u64),
 }
 
 impl PairSolver {
@@ -42,24 +28,30 @@ impl PairSolver {
     /// reach at the end of the substep; the impulses become forces over the substep
     /// (added to `a`), so every integrator moves the marbles consistently with them.
     pub(super) fn solve_contacts(&mut self, p: &PairParams) {
-        self.constraints.clear();
+        // The rows of the passes, pairs first, then boards, each with the impulse the same
+        // contact carried over the last substep (warm start), by key: a pair's two
+        // marbles' entity bits, smaller first; a board's, the marble's and the piece's, the
+        // piece's bits flipped so that they never equal a pair's.
         // (`in_contact` marks the marbles in the rows: [`PairSolver::find_touching`].)
+        self.pair_gs.clear();
+        self.pair_keys.clear();
         for row in &self.rows {
             let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
             let (ka, kb) = (a.entity.to_bits(), b.entity.to_bits());
-            self.constraints.push(Constraint {
+            let key = (ka.min(kb), ka.max(kb));
+            self.pair_gs.push(PairGs {
                 i: row.i,
                 j: row.j,
                 n: row.n,
-                vb: Vec3::ZERO,
-                p: Vec3::ZERO,
                 k: row.k,
-                lambda: 0.0,
-                slop: PAIR_SLOP * a.r.min(b.r),
+                lambda: self.warm.get(&key).copied().unwrap_or(0.0),
                 target: -row.gap / p.h,
-                key: (ka.min(kb), ka.max(kb)),
             });
+            self.pair_keys.push(key);
         }
+        self.board_gs.clear();
+        self.board_keys.clear();
+        self.board_push.clear();
         for t in &self.board_touches {
             if !self.in_contact[t.body as usize] {
                 continue;
@@ -72,20 +64,22 @@ impl PairSolver {
                 // row's force and bounced by the response, and leave faster than it came.
                 continue;
             }
-            self.constraints.push(Constraint {
+            let key = (b.entity.to_bits(), !t.piece.0);
+            self.board_gs.push(BoardGs {
                 i: t.body,
-                j: u32::MAX,
                 n: t.normal,
                 vb: t.velocity,
-                p: t.point,
                 k: 1.0 / b.w,
-                lambda: 0.0,
-                slop: PAIR_SLOP * b.r,
+                lambda: self.warm.get(&key).copied().unwrap_or(0.0),
                 // A speculative row may close its gap within the substep.
                 target: if t.gap > 0.0 { -t.gap / p.h } else { 0.0 },
-                // Board keys: the marble and the piece, the piece's bits flipped so that
-                // they never equal a pair's key.
-                key: (b.entity.to_bits(), !t.piece.0),
+            });
+            self.board_keys.push(key);
+            self.board_push.push(BoardPush {
+                i: t.body,
+                p: t.point,
+                n: t.normal,
+                slop: PAIR_SLOP * b.r,
             });
         }
         let h = p.h;
@@ -96,34 +90,9 @@ impl PairSolver {
             b.v += b.a * h;
         }
         // The passes run on compact copies: velocities and inverse masses by body, and the
-        // pair and board rows apart (the same order as `constraints`: pairs, then boards),
-        // so that the inner loops are short and branch-free.
+        // pair and board rows apart, so that the inner loops are short and branch-free.
         self.vel.clear();
         self.vel.extend(self.bodies.iter().map(|b| b.v.extend(b.w)));
-        self.pair_gs.clear();
-        self.board_gs.clear();
-        for c in &self.constraints {
-            let lambda = self.warm.get(&c.key).copied().unwrap_or(0.0);
-            if c.j == u32::MAX {
-                self.board_gs.push(BoardGs {
-                    i: c.i,
-                    n: c.n,
-                    vb: c.vb,
-                    k: c.k,
-                    lambda,
-                    target: c.target,
-                });
-            } else {
-                self.pair_gs.push(PairGs {
-                    i: c.i,
-                    j: c.j,
-                    n: c.n,
-                    k: c.k,
-                    lambda,
-                    target: c.target,
-                });
-            }
-        }
         self.colour_rows();
         // A marble approaching a board it touches at the substep's start (slower than the
         // threshold: faster ones the cascade bounced) has that approach removed by the
@@ -168,14 +137,6 @@ impl PairSolver {
         for (r, &slot) in self.pair_gs.iter_mut().zip(&self.pair_slot) {
             r.lambda = self.pair_pass[slot as usize].lambda;
         }
-        let lambdas = self
-            .pair_gs
-            .iter()
-            .map(|r| r.lambda)
-            .chain(self.board_gs.iter().map(|r| r.lambda));
-        for (c, lambda) in self.constraints.iter_mut().zip(lambdas) {
-            c.lambda = lambda;
-        }
         // A speculative board row holds its marble in the solve, so that the pair impulses
         // are those of marbles that the board will stop, but its impulse is not a force:
         // the marble does not touch the board, and if it reaches it during the substep the
@@ -192,9 +153,11 @@ impl PairSolver {
             b.v = v.truncate() - *d;
         }
         self.warm_next.clear();
-        for c in &self.constraints {
-            if c.lambda > 0.0 {
-                self.warm_next.insert(c.key, c.lambda);
+        let pairs = self.pair_gs.iter().map(|r| r.lambda).zip(&self.pair_keys);
+        let boards = self.board_gs.iter().map(|r| r.lambda).zip(&self.board_keys);
+        for (lambda, &key) in pairs.chain(boards) {
+            if lambda > 0.0 {
+                self.warm_next.insert(key, lambda);
             }
         }
         std::mem::swap(&mut self.warm, &mut self.warm_next);
