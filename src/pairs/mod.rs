@@ -354,9 +354,8 @@ pub struct PairSolver {
     adjacency: Vec<u32>,
     queue: Vec<u32>,
     first: Vec<u32>,
-    /// Contact stage.
-    /// The rows' warm-start keys (beside `pair_gs` and `board_gs`), and the board rows
-    /// of the projection.
+    /// Contact stage: the rows' warm-start keys (beside `pair_gs` and `board_gs`), and
+    /// the board rows of the projection.
     pair_keys: Vec<(u64, u64)>,
     board_keys: Vec<(u64, u64)>,
     board_push: Vec<BoardPush>,
@@ -375,7 +374,7 @@ pub struct PairSolver {
     /// four.
     push_last: Vec<u32>,
     push_level: Vec<u32>,
-    push_first: Vec<u32>,
+    push_end: Vec<u32>,
     push_order: Vec<u32>,
     push_blocks: Vec<project::PushBlock>,
     pair_gs: Vec<PairGs>,
@@ -985,7 +984,7 @@ impl PairSolver {
         self.push_last.reserve(n);
         self.push_level.reserve(pairs);
         // (At most a level a row, a level's end kept for each.)
-        self.push_first.reserve(pairs + 1);
+        self.push_end.reserve(pairs + 1);
         self.push_order.reserve(pairs);
         self.push_blocks.reserve(pairs / 4);
         self.warm.reserve(pairs + touches);

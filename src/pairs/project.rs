@@ -31,7 +31,7 @@ pub(super) struct PushBlock {
     pub(super) j: [u32; 4],
     /// The rows' normals' `x`, `y` and `z` (for a coincident pair).
     n: [Vec4; 3],
-    k: Vec4,
+    pub(super) k: Vec4,
 }
 
 impl PushBlock {
@@ -49,10 +49,12 @@ impl PushBlock {
 
 impl PairSolver {
     /// Step 5 of [`crate::pairs`]: overlap beyond the slop out of positions, in passes
-    /// over the pair rows and then the board rows, each in the order of the contact
-    /// passes' rows (`pair_gs`, `board_push`).
-    /// In a pile nearly every pair row pushes in every pass (a settled 10,000-marble pour
-    /// at the pile bar: 24,000 of its 33,000 rows, in each of the four), and the order
+    /// over the pair rows and then the board rows, each in the rows' own order
+    /// (`pair_gs`, then `board_push`).
+    ///
+    /// In a pile nearly every pair row pushes in every pass (the 10,000-marble pour at
+    /// the pile bar, over its first second: 24,000 of its 33,000 rows on average, in each
+    /// of the four), and the order
     /// matters: a pass in the rows' order sweeps the pile, one taken colour by colour
     /// does not (it left that pour stirring). So the pair rows keep their order, and are
     /// only regrouped where that changes nothing, by level ([`PairSolver::order_pushes`]),
@@ -72,7 +74,7 @@ impl PairSolver {
             let mut moved = false;
             // Level by level: its rows' blocks, then the rest of its rows one by one.
             let (mut from, mut blocks) = (0, self.push_blocks.iter());
-            for &to in &self.push_first {
+            for &to in &self.push_end {
                 let of_level = &self.push_order[from..to as usize];
                 let wide = of_level.len() / 4 * 4;
                 for b in blocks.by_ref().take(wide / 4) {
@@ -109,16 +111,17 @@ impl PairSolver {
     /// level in the rows' order, as blocks of four and then single rows. Rows of a level
     /// share no marble; rows that share one keep their order (the later one's level is
     /// higher), and rows that share none commute, so a pass in this order gives the bits
-    /// of a pass in the rows' own, with the rows of a level free to go at once (a settled
-    /// 10,000-marble pile's 35,000 rows fall into about 860 levels). Leaves `push_order`
-    /// (the rows by level), `push_first` (where each level ends there) and `push_blocks`
+    /// of a pass in the rows' own, with the rows of a level free to go at once (the
+    /// 10,000-marble pour's 35,000 rows at half a second fall into about 860 levels).
+    /// Leaves `push_order` (the rows by level), `push_end` (where each level ends
+    /// there) and `push_blocks`
     /// (each level's rows by four, the last one to three of a level left out).
     pub(super) fn order_pushes(&mut self) {
         let rows = &self.pair_gs;
-        let (last, level, first, order) = (
+        let (last, level, end, order) = (
             &mut self.push_last,
             &mut self.push_level,
-            &mut self.push_first,
+            &mut self.push_end,
             &mut self.push_order,
         );
         // `last[m]`: one more than the level of marble m's latest row.
@@ -134,27 +137,28 @@ impl PairSolver {
             last[j] = l + 1;
             levels = levels.max(l + 1);
         }
-        // The rows by level, in order within each (a counting sort).
-        first.clear();
-        first.resize(levels as usize + 1, 0);
+        // The rows by level, in order within each (a counting sort: `end[l]` is where
+        // level l starts until the scatter has moved it past the level's rows).
+        end.clear();
+        end.resize(levels as usize + 1, 0);
         for &l in level.iter() {
-            first[l as usize + 1] += 1;
+            end[l as usize + 1] += 1;
         }
         for l in 0..levels as usize {
-            first[l + 1] += first[l];
+            end[l + 1] += end[l];
         }
         order.clear();
         order.resize(rows.len(), 0);
         for (k, &l) in level.iter().enumerate() {
-            order[first[l as usize] as usize] = k as u32;
-            first[l as usize] += 1;
+            order[end[l as usize] as usize] = k as u32;
+            end[l as usize] += 1;
         }
-        // `first[l]`: where level l ends in `order`.
-        first.pop();
+        // `end[l]`: where level l ends in `order`.
+        end.pop();
         let blocks = &mut self.push_blocks;
         blocks.clear();
         let mut from = 0;
-        for &to in first.iter() {
+        for &to in end.iter() {
             let of_level = &order[from..to as usize];
             for four in of_level.chunks_exact(4) {
                 blocks.push(PushBlock::new(

@@ -89,8 +89,9 @@ impl PairSolver {
             b.v0 = b.v;
             b.v += b.a * h;
         }
-        // The passes run on compact copies: velocities and inverse masses by body, and the
-        // pair and board rows apart, so that the inner loops are short and branch-free.
+        // The passes run on the compact rows (pair and board apart) and a compact copy of
+        // the velocities and inverse masses by body, so that the inner loops are short and
+        // branch-free.
         self.vel.clear();
         self.vel.extend(self.bodies.iter().map(|b| b.v.extend(b.w)));
         self.colour_rows();

@@ -166,12 +166,17 @@ fn projection_blocks_are_four_single_rows() {
         let mut centres: Vec<Centre> = vec![Vec4::ZERO; 8];
         // Marbles 0..4 against 4..8 in a shuffled order: no two rows share a marble.
         let pairs: [(usize, usize); 4] = std::array::from_fn(|k| (k, 4 + (k + 1) % 4));
-        for &(i, j) in &pairs {
+        for (k, &(i, j)) in pairs.iter().enumerate() {
             let left = |r: f32, x: f32| if x > 0.6 { 0.0 } else { r * x.abs() };
             let x = Vec3::new(rnd(), rnd(), rnd());
             let reach = sizes[i].x + sizes[j].x;
             let apart = Vec3::new(rnd(), rnd(), rnd()).normalize() * reach * (1.0 - 0.35 * rnd());
-            let y = if case % 97 == 0 { x } else { x + apart };
+            // Now and then a coincident pair, beside pairs that are not.
+            let y = if (4 * case + k) % 97 == 0 {
+                x
+            } else {
+                x + apart
+            };
             centres[i] = x.extend(left(sizes[i].x, rnd()));
             centres[j] = y.extend(left(sizes[j].x, rnd()));
         }
@@ -221,14 +226,15 @@ fn projection_order_keeps_each_marbles_rows_in_order() {
         let mut solver = PairSolver {
             bodies: (0..marbles).map(|k| resting(k, Vec3::ZERO, 0.01)).collect(),
             pair_gs: (0..rows)
-                .map(|_| {
+                .map(|row| {
                     let i = (uniform() * marbles as f32) as u32 % marbles as u32;
                     let j = (i + 1 + (uniform() * (marbles - 1) as f32) as u32) % marbles as u32;
                     PairGs {
                         i: i.min(j),
                         j: i.max(j),
                         n: Vec3::Y,
-                        k: 0.5,
+                        // Tells the rows apart.
+                        k: row as f32,
                         lambda: 0.0,
                         target: 0.0,
                     }
@@ -239,14 +245,17 @@ fn projection_order_keeps_each_marbles_rows_in_order() {
         solver.order_pushes();
         let mut placed = Vec::new();
         let (mut from, mut blocks) = (0, solver.push_blocks.iter());
-        for &to in &solver.push_first {
+        for &to in &solver.push_end {
             let of_level = &solver.push_order[from..to as usize];
             let wide = of_level.len() / 4 * 4;
-            let mut level: Vec<(u32, u32)> = blocks
-                .by_ref()
-                .take(wide / 4)
-                .flat_map(|b| (0..4).map(|l| (b.i[l], b.j[l])))
-                .collect();
+            let mut level: Vec<(u32, u32)> = Vec::new();
+            for (b, four) in blocks.by_ref().take(wide / 4).zip(of_level.chunks(4)) {
+                for (l, &k) in four.iter().enumerate() {
+                    let r = &solver.pair_gs[k as usize];
+                    assert_eq!((b.i[l], b.j[l], b.k[l]), (r.i, r.j, r.k), "a block's lane");
+                    level.push((r.i, r.j));
+                }
+            }
             level.extend(of_level[wide..].iter().map(|&k| {
                 let r = &solver.pair_gs[k as usize];
                 (r.i, r.j)
@@ -261,6 +270,18 @@ fn projection_order_keeps_each_marbles_rows_in_order() {
             from = to as usize;
         }
         assert!(blocks.next().is_none(), "every block in a level");
+        let mut order = solver.push_order.clone();
+        order.sort_unstable();
+        assert!(
+            order.iter().copied().eq(0..rows as u32),
+            "every row once ({marbles} marbles)"
+        );
+        if marbles > 1000 {
+            assert!(
+                solver.push_blocks.len() > rows / 8,
+                "rows go four at a time"
+            );
+        }
         assert_eq!(placed.len(), rows, "every row once");
         for m in 0..marbles as u32 {
             let own = |list: &mut dyn Iterator<Item = (u32, u32)>| {
@@ -274,6 +295,125 @@ fn projection_order_keeps_each_marbles_rows_in_order() {
             );
         }
     }
+}
+
+/// The projection ([`PairSolver::project`]) gives, bit for bit, what its passes give one
+/// row after another in the rows' order, pair rows first, then board rows: a random
+/// crushed pile of 400 marbles of mixed sizes and masses on a floor, every overlapping
+/// pair a row (in the marbles' order, as the candidate pairs come), centres, what was
+/// changed, and a few marbles left that the pushes move.
+#[test]
+fn projection_is_the_rows_one_after_another() {
+    use super::project::{MAX_PROJECTION, PROJECTION, PROJECTION_PASSES};
+    let mut uniform = uniform(0x1656_67b1);
+    let n = 400;
+    let bodies: Vec<Body> = (0..n)
+        .map(|k| {
+            let r = 0.01 + 0.005 * uniform();
+            let x = Vec3::new(uniform(), 0.3 * uniform(), uniform()) * 0.12;
+            Body {
+                w: 1.0 / (0.5 + 2.0 * uniform()),
+                ..resting(k, x, r)
+            }
+        })
+        .collect();
+    let mut pair_gs = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            let (a, b) = (&bodies[i], &bodies[j]);
+            if (b.x - a.x).length() < a.r + b.r {
+                pair_gs.push(PairGs {
+                    i: i as u32,
+                    j: j as u32,
+                    n: Vec3::Y,
+                    k: 1.0 / (a.w + b.w),
+                    lambda: 0.0,
+                    target: 0.0,
+                });
+            }
+        }
+    }
+    let board_push: Vec<BoardPush> = bodies
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| b.x.y < b.r)
+        .map(|(i, b)| BoardPush {
+            i: i as u32,
+            p: Vec3::new(b.x.x, 0.0, b.x.z),
+            n: Vec3::Y,
+            slop: PAIR_SLOP * b.r,
+        })
+        .collect();
+    assert!(pair_gs.len() > 2 * n && !board_push.is_empty());
+    // One row after another.
+    let mut x: Vec<Vec3> = bodies.iter().map(|b| b.x).collect();
+    let mut left: Vec<f32> = bodies.iter().map(|b| b.r).collect();
+    let mut changed = vec![false; n];
+    for _ in 0..PROJECTION_PASSES {
+        let mut moved = false;
+        for c in &pair_gs {
+            let (i, j) = (c.i as usize, c.j as usize);
+            let (ri, rj) = (bodies[i].r, bodies[j].r);
+            let slop = PAIR_SLOP * ri.min(rj);
+            let d = x[j] - x[i];
+            let dist = d.length();
+            let gap = dist - ri - rj;
+            if gap < -slop {
+                let nn = if dist > 0.0 { d / dist } else { c.n };
+                let push = (PROJECTION * (-slop - gap)).min(MAX_PROJECTION * ri.min(rj)) * c.k;
+                let pi = (push * bodies[i].w).min(left[i]);
+                let pj = (push * bodies[j].w).min(left[j]);
+                if pi <= 0.0 && pj <= 0.0 {
+                    continue;
+                }
+                x[i] -= pi * nn;
+                x[j] += pj * nn;
+                left[i] -= pi;
+                left[j] -= pj;
+                changed[i] = true;
+                changed[j] = true;
+                moved = true;
+            }
+        }
+        for c in &board_push {
+            let i = c.i as usize;
+            let gap = (x[i] - c.p).dot(c.n) - bodies[i].r;
+            if gap < -c.slop && left[i] > 0.0 {
+                let most = (MAX_PROJECTION * bodies[i].r).min(left[i]);
+                let push = (PROJECTION * (-c.slop - gap)).min(most);
+                x[i] += push * c.n;
+                left[i] -= push;
+                changed[i] = true;
+                moved = true;
+            }
+        }
+        if !moved {
+            break;
+        }
+    }
+    let mut solver = PairSolver {
+        bodies,
+        pair_gs,
+        board_push,
+        changed: vec![false; n],
+        ..PairSolver::default()
+    };
+    solver.project();
+    let bits = |x: &mut dyn Iterator<Item = Vec3>| {
+        x.map(|v| v.to_array().map(f32::to_bits))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        bits(&mut solver.bodies.iter().map(|b| b.x)),
+        bits(&mut x.iter().copied())
+    );
+    assert_eq!(solver.changed, changed);
+    let pushed = changed.iter().filter(|&&c| c).count();
+    assert!(pushed > n / 2, "{pushed} of {n} pushed");
+    assert!(
+        solver.push_blocks.len() > solver.pair_gs.len() / 8,
+        "rows go four at a time"
+    );
 }
 
 #[test]
