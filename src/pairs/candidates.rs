@@ -76,23 +76,49 @@ pub(super) fn candidate_pairs<'a>(
         .copied()
 }
 
-/// Calls `each` with every candidate pair ([`candidate_pairs`]) in the bodies' indices: with
-/// `local` (a selection, [`PairSolver::select_bodies`]), each marble's index among the
-/// bodies.
-#[inline]
+/// [`for_placed_body_pairs`] without the places.
+#[cfg(test)]
 pub(super) fn for_body_pairs(
+    candidates: &[(u32, u32)],
+    extra: &[(u32, u32)],
+    strays: (&[bool], &[u32]),
+    local: Option<&[u32]>,
+    mut each: impl FnMut((u32, u32)),
+) {
+    for_placed_body_pairs(0, candidates, extra, strays, local, |_, pair| each(pair));
+}
+
+/// Calls `each` with every candidate pair ([`candidate_pairs`]) in the bodies' indices (with
+/// `local`, a selection ([`PairSolver::select_bodies`]), each marble's index among the
+/// bodies) and its place in the order of `candidates` then `extra`, counted from `first`
+/// (the pairs of strays left out counted too).
+#[inline]
+fn for_placed_body_pairs(
+    first: u32,
     candidates: &[(u32, u32)],
     extra: &[(u32, u32)],
     (stray, strays): (&[bool], &[u32]),
     local: Option<&[u32]>,
-    each: impl FnMut((u32, u32)),
+    mut each: impl FnMut(u32, (u32, u32)),
 ) {
-    let pairs = candidate_pairs(candidates, extra, stray, strays);
+    let any = !strays.is_empty();
+    let standing = (first..)
+        .zip(candidates)
+        .filter(move |&(_, &(i, j))| !(any && (stray[i as usize] || stray[j as usize])));
+    let fresh = (first + candidates.len() as u32..).zip(extra);
     match local {
-        Some(local) => pairs
-            .map(|(i, j)| (local[i as usize], local[j as usize]))
-            .for_each(each),
-        None => pairs.for_each(each),
+        Some(local) => {
+            let mut each = |(at, &(i, j)): (u32, &(u32, u32))| {
+                each(at, (local[i as usize], local[j as usize]))
+            };
+            standing.for_each(&mut each);
+            fresh.for_each(each);
+        }
+        None => {
+            let mut each = |(at, &pair): (u32, &(u32, u32))| each(at, pair);
+            standing.for_each(&mut each);
+            fresh.for_each(each);
+        }
     }
 }
 
@@ -111,8 +137,8 @@ fn cut<'a>(
     )
 }
 
-/// [`for_body_pairs`] with `each` pushing what it finds of a pair onto a buffer, which is
-/// `out`: with `parallel` (and the `parallel` feature), in chunks of the pairs on the
+/// [`for_placed_body_pairs`] with `each` pushing what it finds of a pair (given with its place in
+/// the candidate pairs' order) onto a buffer, which is `out`: with `parallel` (and the `parallel` feature), in chunks of the pairs on the
 /// task pool, each chunk's into its own buffer of `chunks`, joined in the chunks' order
 /// ([`grid::scan_chunked`]): the same values in the same order either way.
 #[expect(
@@ -127,16 +153,19 @@ pub(super) fn scan_body_pairs<T: Copy + Send>(
     parallel: bool,
     chunks: &mut Vec<Vec<T>>,
     out: &mut Vec<T>,
-    each: impl Fn((u32, u32), &mut Vec<T>) + Sync,
+    each: impl Fn(u32, (u32, u32), &mut Vec<T>) + Sync,
 ) {
     let total = candidates.len() + extra.len();
     grid::scan_chunked(total, parallel, chunks, out, |range, found| {
+        let first = range.start as u32;
         let (kept, extra) = cut(range, candidates, extra);
-        for_body_pairs(kept, extra, strays, local, |pair| each(pair, found));
+        for_placed_body_pairs(first, kept, extra, strays, local, |at, pair| {
+            each(at, pair, found)
+        });
     });
 }
 
-/// Whether `test` holds for any candidate pair ([`for_body_pairs`]): with `parallel` (and
+/// Whether `test` holds for any candidate pair ([`for_placed_body_pairs`]): with `parallel` (and
 /// the `parallel` feature), the pairs are cut into chunks on the task pool, each of which
 /// stops once any chunk has found one.
 pub(super) fn any_body_pair(

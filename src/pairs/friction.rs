@@ -15,16 +15,15 @@ impl PairSolver {
         if !self.bodies.iter().any(|b| b.spins) {
             return;
         }
-        for row in &self.rows {
+        for (row, gs) in self.rows.iter().zip(&self.pair_gs) {
             let (i, j) = (row.i as usize, row.j as usize);
             let (a, b) = (&self.bodies[i], &self.bodies[j]);
-            if !(a.spins && b.spins) || row.kind != Found::Start {
+            // The row's warm-start impulse ([`PairSolver::pair_rows`]): none kept, none
+            // carried.
+            let normal = gs.lambda;
+            if !(a.spins && b.spins) || row.kind != Found::Start || normal == 0.0 {
                 continue;
             }
-            let (ka, kb) = (a.entity.to_bits(), b.entity.to_bits());
-            let Some(&normal) = self.warm.get(&(ka.min(kb), ka.max(kb))) else {
-                continue;
-            };
             let n = row.n;
             let vc = (b.v + b.omega.cross(-b.r * n)) - (a.v + a.omega.cross(a.r * n));
             let slip = vc - vc.dot(n) * n;

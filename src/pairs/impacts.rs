@@ -114,6 +114,7 @@ impl Cascade<'_> {
                 }
                 self.rows[k] = Row {
                     collided: row.collided,
+                    at: row.at,
                     ..r
                 };
             }

@@ -23,7 +23,7 @@
 //!    change before the step's motion, as a cascade: an impulse that makes a touching
 //!    neighbour (or a board) approach faster than the threshold makes it collide in turn,
 //!    at the same instant. Friction between touching marbles that spin (`friction.rs`).
-//! 4. **Contacts** (`colour.rs`, `rows.rs`, `solve.rs`): every touching pair, every
+//! 4. **Contacts** (`colour.rs`, `rows.rs`, `solve.rs`, `warm.rs`): every touching pair, every
 //!    speculative pair (apart by a gap it could close during the substep), and those
 //!    marbles' board contacts (recorded, and speculative rows for the pieces they could
 //!    reach) are solved together by projected Gauss–Seidel with warm starting and
@@ -66,6 +66,7 @@ mod narrow;
 mod project;
 mod rows;
 mod solve;
+mod warm;
 
 use candidates::{any_body_pair, scan_body_pairs};
 pub(crate) use grid::{Grid, KeyMap};
@@ -74,6 +75,7 @@ use narrow::{
 };
 use rows::{BoardGs, ColourSpan, PairGs, RowBlock, Vel, accumulate, larger};
 use solve::BoardPush;
+use warm::Warm;
 
 /// Overlap left alone by the position projection, as a fraction of the smaller radius.
 pub const PAIR_SLOP: f32 = 2e-3;
@@ -195,6 +197,11 @@ struct Row {
     /// Gap between the marbles at the substep's start, m ([`Found::Near`] rows; zero for
     /// the others).
     gap: f32,
+    /// The pair's place in the order of the candidate pairs ([`candidates::candidate_pairs`]) that
+    /// found it, in the contact stage ([`PairSolver::find_touching`]): its warm start is
+    /// found by walking the last substep's rows in that order ([`warm`]). `u32::MAX`
+    /// elsewhere.
+    at: u32,
 }
 
 /// How a pair was found by the narrow phase.
@@ -358,10 +365,12 @@ pub struct PairSolver {
     /// the board rows of the projection.
     pair_keys: Vec<(u64, u64)>,
     board_keys: Vec<(u64, u64)>,
+    /// Each board row's marble (its place for the warm start: [`warm`]).
+    board_places: Vec<u32>,
     board_push: Vec<BoardPush>,
     in_contact: Vec<bool>,
-    warm: KeyMap,
-    warm_next: KeyMap,
+    /// The contact impulses kept for warm starting.
+    warm: Warm,
     /// Velocities and inverse masses in the passes.
     vel: Vec<Vel>,
     /// The projection's centres (and what each marble may still move), radii and
@@ -680,9 +689,9 @@ impl PairSolver {
     /// pair's key starts with its smaller entity, and a marble falls asleep with every
     /// marble it touches.
     pub(crate) fn stow_impulses(&self, sorted: &[u64], store: &mut KeyMap) {
-        for (key, &lambda) in &self.warm {
+        for (key, lambda) in self.warm.iter() {
             if sorted.binary_search(&key.0).is_ok() {
-                store.insert(*key, lambda);
+                store.insert(key, lambda);
             }
         }
     }
@@ -694,7 +703,7 @@ impl PairSolver {
         store.retain(|key, lambda| {
             let woken = sorted.binary_search(&key.0).is_ok();
             if woken {
-                warm.insert(*key, *lambda);
+                warm.restore(*key, *lambda);
             }
             !woken
         });
@@ -729,13 +738,13 @@ impl PairSolver {
         self.changed.clear();
         self.changed.resize(n, false);
         // 2. The touching pairs, and the pairs that could close their gap this substep.
-        self.scan_rows(|bodies, (i, j), rows| {
+        self.scan_rows(|bodies, at, (i, j), rows| {
             if let Some(row) = narrow(bodies, i, j, p) {
                 if row.kind == Found::Start {
-                    rows.push(row);
+                    rows.push(Row { at, ..row });
                 }
             } else if let Some(row) = near_row(bodies, i, j, p) {
-                rows.push(row);
+                rows.push(Row { at, ..row });
             }
         });
         if self.rows.is_empty() {
@@ -761,7 +770,9 @@ impl PairSolver {
     pub fn solve_touching(&mut self, p: &PairParams, out: &mut MarbleContacts) {
         // 3. Collisions of touching pairs: velocity changes at the start.
         self.collide(p, false);
-        // Friction between touching marbles that spin.
+        // Friction between touching marbles that spin, capped by the pair rows' warm-start
+        // impulses.
+        self.pair_rows(p);
         self.friction();
         // 4. Contacts: forces over the substep.
         self.solve_contacts(p);
@@ -826,7 +837,7 @@ impl PairSolver {
         self.check_bodies();
         self.changed.clear();
         self.changed.resize(n, false);
-        self.scan_rows(|bodies, (i, j), rows| {
+        self.scan_rows(|bodies, _, (i, j), rows| {
             if let Some(mut row) = narrow(bodies, i, j, p) {
                 if row.kind == Found::Impact && shallow(bodies, &row) {
                     // An impact that leaves the pair overlapping by less than a small share
@@ -848,10 +859,10 @@ impl PairSolver {
         );
     }
 
-    /// Makes `rows` what `each` finds of the candidate pairs (in the bodies' indices), in
-    /// their order: with `on_pool`, in chunks on the task pool
-    /// ([`scan_body_pairs`]).
-    fn scan_rows(&mut self, each: impl Fn(&[Body], (u32, u32), &mut Vec<Row>) + Sync) {
+    /// Makes `rows` what `each` finds of the candidate pairs (in the bodies' indices, with
+    /// each pair's place in their order), in their order: with `on_pool`, in chunks on the
+    /// task pool ([`scan_body_pairs`]).
+    fn scan_rows(&mut self, each: impl Fn(&[Body], u32, (u32, u32), &mut Vec<Row>) + Sync) {
         self.rows.clear();
         let local = self.compact.then_some(self.local.as_slice());
         let strays = (self.stray.as_slice(), self.strays.as_slice());
@@ -864,7 +875,7 @@ impl PairSolver {
             self.on_pool,
             &mut self.row_chunks,
             &mut self.rows,
-            |pair, rows| each(bodies, pair, rows),
+            |at, pair, rows| each(bodies, at, pair, rows),
         );
     }
 
@@ -969,6 +980,7 @@ impl PairSolver {
         self.queue.reserve(pairs);
         self.pair_keys.reserve(pairs);
         self.board_keys.reserve(touches);
+        self.board_places.reserve(touches);
         self.board_push.reserve(touches);
         self.pair_gs.reserve(pairs);
         self.pair_pass.reserve(pairs);
@@ -987,8 +999,7 @@ impl PairSolver {
         self.push_end.reserve(pairs + 1);
         self.push_order.reserve(pairs);
         self.push_blocks.reserve(pairs / 4);
-        self.warm.reserve(pairs + touches);
-        self.warm_next.reserve(pairs + touches);
+        self.warm.reserve(pairs, touches);
         self.board_touches.reserve(touches);
         self.touch_start.reserve(n + 1);
         self.adjacency_start.reserve(n + 1);

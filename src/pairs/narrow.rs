@@ -99,6 +99,7 @@ pub(super) fn late_row(
         kind: Found::Impact,
         collided: false,
         gap: 0.0,
+        at: u32::MAX,
     })
 }
 
@@ -135,6 +136,7 @@ pub(super) fn near_row(bodies: &[Body], i: u32, j: u32, p: &PairParams) -> Optio
         kind: Found::Near,
         collided: false,
         gap,
+        at: u32::MAX,
     })
 }
 
@@ -171,6 +173,7 @@ pub(super) fn narrow(bodies: &[Body], i: u32, j: u32, p: &PairParams) -> Option<
             kind,
             collided: false,
             gap: 0.0,
+            at: u32::MAX,
         }
     };
     if l0 - reach <= tol {

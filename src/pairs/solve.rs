@@ -23,34 +23,44 @@ pub(super) struct BoardPush {
 }
 
 impl PairSolver {
-    /// Step 4 of [`crate::pairs`]: sequential impulses over every touching pair and the
-    /// board contacts of their marbles, warm started, on the velocities the marbles would
-    /// reach at the end of the substep; the impulses become forces over the substep
-    /// (added to `a`), so every integrator moves the marbles consistently with them.
-    pub(super) fn solve_contacts(&mut self, p: &PairParams) {
-        // The rows of the passes, pairs first, then boards, each with the impulse the same
-        // contact carried over the last substep (warm start), by key: a pair's two
-        // marbles' entity bits, smaller first; a board's, the marble's and the piece's, the
-        // piece's bits flipped so that they never equal a pair's.
-        // (`in_contact` marks the marbles in the rows: [`PairSolver::find_touching`].)
+    /// The pair rows of the passes, built after the collisions at the start (before
+    /// friction, which reads their warm-start impulses): each touching or speculative
+    /// pair with the impulse the same contact carried over the last substep (warm start),
+    /// by key: the pair's two marbles' entity bits, smaller first.
+    pub(super) fn pair_rows(&mut self, p: &PairParams) {
         self.pair_gs.clear();
         self.pair_keys.clear();
         for row in &self.rows {
             let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
             let (ka, kb) = (a.entity.to_bits(), b.entity.to_bits());
-            let key = (ka.min(kb), ka.max(kb));
             self.pair_gs.push(PairGs {
                 i: row.i,
                 j: row.j,
                 n: row.n,
                 k: row.k,
-                lambda: self.warm.get(&key).copied().unwrap_or(0.0),
+                lambda: 0.0,
                 target: -row.gap / p.h,
             });
-            self.pair_keys.push(key);
+            self.pair_keys.push((ka.min(kb), ka.max(kb)));
         }
+        let (rows, places) = (&mut self.pair_gs, self.rows.iter().map(|r| r.at));
+        self.warm
+            .find_pairs(&self.pair_keys, places, |k, lambda| rows[k].lambda = lambda);
+    }
+
+    /// Step 4 of [`crate::pairs`]: sequential impulses over every touching pair (the rows
+    /// of [`PairSolver::pair_rows`]) and the board contacts of their marbles, warm
+    /// started, on the velocities the marbles would reach at the end of the substep; the
+    /// impulses become forces over the substep (added to `a`), so every integrator moves
+    /// the marbles consistently with them.
+    pub(super) fn solve_contacts(&mut self, p: &PairParams) {
+        // The board rows, each with the impulse the same contact carried over the last
+        // substep, by key: the marble's entity bits and the piece's, the piece's flipped
+        // so that they never equal a pair's.
+        // (`in_contact` marks the marbles in the rows: [`PairSolver::find_touching`].)
         self.board_gs.clear();
         self.board_keys.clear();
+        self.board_places.clear();
         self.board_push.clear();
         for t in &self.board_touches {
             if !self.in_contact[t.body as usize] {
@@ -70,11 +80,13 @@ impl PairSolver {
                 n: t.normal,
                 vb: t.velocity,
                 k: 1.0 / b.w,
-                lambda: self.warm.get(&key).copied().unwrap_or(0.0),
+                lambda: 0.0,
                 // A speculative row may close its gap within the substep.
                 target: if t.gap > 0.0 { -t.gap / p.h } else { 0.0 },
             });
             self.board_keys.push(key);
+            self.board_places
+                .push(self.marble_of(t.body as usize) as u32);
             self.board_push.push(BoardPush {
                 i: t.body,
                 p: t.point,
@@ -82,6 +94,11 @@ impl PairSolver {
                 slop: PAIR_SLOP * b.r,
             });
         }
+        let (rows, places) = (&mut self.board_gs, self.board_places.iter().copied());
+        self.warm
+            .find_boards(&self.board_keys, places, |k, lambda| {
+                rows[k].lambda = lambda
+            });
         let h = p.h;
         // From here on `v` is the velocity each marble would reach at the end of the
         // substep without contact forces, `v0` its velocity at the start.
@@ -153,15 +170,15 @@ impl PairSolver {
         for ((b, v), d) in bodies.iter_mut().zip(vel.iter()).zip(&self.dv) {
             b.v = v.truncate() - *d;
         }
-        self.warm_next.clear();
-        let pairs = self.pair_gs.iter().map(|r| r.lambda).zip(&self.pair_keys);
-        let boards = self.board_gs.iter().map(|r| r.lambda).zip(&self.board_keys);
-        for (lambda, &key) in pairs.chain(boards) {
-            if lambda > 0.0 {
-                self.warm_next.insert(key, lambda);
-            }
-        }
-        std::mem::swap(&mut self.warm, &mut self.warm_next);
+        let pairs = (self.pair_keys.iter().zip(&self.rows).zip(&self.pair_gs))
+            .map(|((&key, row), gs)| (key, row.at, gs.lambda));
+        let boards = (self
+            .board_keys
+            .iter()
+            .zip(&self.board_places)
+            .zip(&self.board_gs))
+        .map(|((&key, &place), gs)| (key, place, gs.lambda));
+        self.warm.keep(pairs, boards);
         // The impulses are forces over the substep.
         for (k, b) in bodies.iter_mut().enumerate() {
             let free = b.v0 + b.a * h;

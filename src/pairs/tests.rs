@@ -640,8 +640,8 @@ fn stray_pairs_found_in_chunks_keep_their_order() {
 /// The candidate pairs' narrow phase in chunks on the task pool (with the `parallel`
 /// feature) sees the pairs of one walk, in its order: 6,000 kept candidates (those with a
 /// stray marble left out) and 3,000 strays' pairs, through a selection's indices, cut
-/// into chunks of which one spans the two lists; and whether any pair passes a test is
-/// the same either way.
+/// into chunks of which one spans the two lists, each with its place in the two lists; and
+/// whether any pair passes a test is the same either way.
 #[test]
 fn candidate_pairs_scanned_in_chunks_keep_their_order() {
     start_pool();
@@ -660,8 +660,8 @@ fn candidate_pairs_scanned_in_chunks_keep_their_order() {
     });
     let pairs = walked.len();
     assert!(pairs > 8000 && pairs < 9000, "{pairs} pairs");
-    let (mut chunks, mut scanned) = (Vec::new(), Vec::new());
-    let each = |pair: (u32, u32), out: &mut Vec<(u32, u32)>| out.push(pair);
+    let (mut chunks, mut placed) = (Vec::new(), Vec::new());
+    let each = |at: u32, pair: (u32, u32), out: &mut Vec<(u32, (u32, u32))>| out.push((at, pair));
     scan_body_pairs(
         &candidates,
         &extra,
@@ -669,10 +669,21 @@ fn candidate_pairs_scanned_in_chunks_keep_their_order() {
         Some(&local),
         true,
         &mut chunks,
-        &mut scanned,
+        &mut placed,
         each,
     );
+    let scanned: Vec<(u32, u32)> = placed.iter().map(|&(_, pair)| pair).collect();
     assert_eq!(walked, scanned, "candidate pairs scanned in chunks");
+    // Each pair's place is where it stands in the candidates, then the strays' pairs.
+    assert!(placed.windows(2).all(|w| w[0].0 < w[1].0), "places ascend");
+    for &(at, pair) in &placed {
+        let at = at as usize;
+        let (i, j) = candidates
+            .get(at)
+            .copied()
+            .unwrap_or_else(|| extra[at - candidates.len()]);
+        assert_eq!(pair, (local[i as usize], local[j as usize]), "pair at {at}");
+    }
     #[cfg(feature = "parallel")]
     assert!(chunks.len() > 1, "the scan was cut into chunks");
     let last = *walked.last().unwrap();
@@ -751,4 +762,110 @@ fn selected_bodies_give_the_bits_of_every_marble() {
 fn start_pool() {
     #[cfg(feature = "parallel")]
     bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
+}
+
+/// The warm-start impulses that a substep's rows find are what a map from key to the last
+/// substep's impulse gives, however the rows change: over 300 substeps of random pair
+/// rows (contacts kept, ended and begun, rows moved to the end as a stray's pairs are,
+/// the whole order renumbered and shuffled as when the candidates are found afresh,
+/// impulses zero or positive, impulses put back for marbles that woke, everything
+/// forgotten now and then), each row's impulse against a `HashMap`'s, and every impulse
+/// kept (what a marble falling asleep stows) against the map's contents.
+#[test]
+fn warm_start_finds_what_a_map_of_the_last_impulses_gives() {
+    use super::warm::{Key, Warm};
+    let mut uniform = uniform(0x7f4a_7c15);
+    let mut warm = Warm::default();
+    let mut reference: HashMap<Key, f32> = HashMap::new();
+    let key = |a: u64, b: u64| (a.min(b), a.max(b));
+    // This substep's rows: (key, place), places ascending.
+    let mut rows: Vec<(Key, u32)> = (0..300u64).map(|k| (key(k, k + 1), k as u32 * 2)).collect();
+    let mut hits = 0usize;
+    for substep in 0..300 {
+        if substep % 97 == 50 {
+            warm.clear();
+            reference.clear();
+        }
+        if substep % 7 == 3 {
+            // Marbles that woke: impulses put back, some for keys kept as well.
+            for _ in 0..5 {
+                let k = if uniform() < 0.5 && !rows.is_empty() {
+                    rows[(uniform() * rows.len() as f32) as usize % rows.len()].0
+                } else {
+                    key(1000 + (uniform() * 50.0) as u64, 2000)
+                };
+                let lambda = 1.0 + uniform();
+                warm.restore(k, lambda);
+                reference.insert(k, lambda);
+            }
+        }
+        let keys: Vec<Key> = rows.iter().map(|r| r.0).collect();
+        let mut found = vec![0.0f32; rows.len()];
+        warm.find_pairs(&keys, rows.iter().map(|r| r.1), |k, lambda| {
+            found[k] = lambda
+        });
+        for (k, key) in keys.iter().enumerate() {
+            let expected = reference.get(key).copied().unwrap_or(0.0);
+            assert_eq!(
+                found[k].to_bits(),
+                expected.to_bits(),
+                "substep {substep}, row {k}"
+            );
+            hits += usize::from(expected > 0.0);
+        }
+        // The solve's impulses, kept for the next substep.
+        let impulses: Vec<f32> = (0..rows.len())
+            .map(|_| if uniform() < 0.2 { 0.0 } else { uniform() })
+            .collect();
+        let kept = rows.iter().zip(&impulses).map(|(r, &l)| (r.0, r.1, l));
+        warm.keep(kept, std::iter::empty());
+        reference.clear();
+        for (r, &l) in rows.iter().zip(&impulses) {
+            if l > 0.0 {
+                reference.insert(r.0, l);
+            }
+        }
+        let stowed: HashMap<Key, f32> = warm.iter().collect();
+        assert_eq!(stowed, reference, "substep {substep}: every impulse kept");
+        // The next substep's rows.
+        // (Each key once: `seen`.)
+        let mut next: Vec<(Key, u32)> = Vec::new();
+        let mut moved = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for &(k, place) in &rows {
+            let u = uniform();
+            if u < 0.05 || !seen.insert(k) {
+                continue; // ended
+            }
+            if u < 0.08 {
+                moved.push(k); // a stray's pair, to the end
+                continue;
+            }
+            next.push((k, place));
+            let fresh = key(10_000 + (uniform() * 5000.0) as u64, k.1);
+            if uniform() < 0.05 && seen.insert(fresh) {
+                next.push((fresh, place)); // begun next to it
+            }
+        }
+        if substep % 11 == 10 {
+            // The candidates found afresh: a new order.
+            for i in (1..next.len()).rev() {
+                let j = (uniform() * (i + 1) as f32) as usize % (i + 1);
+                next.swap(i, j);
+            }
+        }
+        // Places ascending (begun rows share their neighbour's place, as a board row
+        // shares its marble's), the moved rows after them all.
+        let mut place = 0;
+        for r in next.iter_mut() {
+            place += (uniform() * 3.0) as u32;
+            r.1 = place;
+        }
+        for k in moved {
+            place += 1;
+            next.push((k, place));
+        }
+        rows = next;
+    }
+    assert!(hits > 10_000, "{hits} rows warm started");
 }
