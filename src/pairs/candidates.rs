@@ -137,10 +137,11 @@ fn cut<'a>(
     )
 }
 
-/// [`for_placed_body_pairs`] with `each` pushing what it finds of a pair (given with its place in
-/// the candidate pairs' order) onto a buffer, which is `out`: with `parallel` (and the `parallel` feature), in chunks of the pairs on the
-/// task pool, each chunk's into its own buffer of `chunks`, joined in the chunks' order
-/// ([`grid::scan_chunked`]): the same values in the same order either way.
+/// [`for_placed_body_pairs`] with `each` pushing what it finds of a pair (given with its
+/// place) onto a buffer, which is `out`: with `parallel` (and the `parallel` feature), in
+/// chunks of the pairs on the task pool, each chunk's into its own buffer of `chunks`,
+/// joined in the chunks' order ([`grid::scan_chunked`]): the same values in the same order
+/// either way.
 #[expect(
     clippy::too_many_arguments,
     reason = "the candidate lists, handed over"

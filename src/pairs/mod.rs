@@ -197,10 +197,10 @@ struct Row {
     /// Gap between the marbles at the substep's start, m ([`Found::Near`] rows; zero for
     /// the others).
     gap: f32,
-    /// The pair's place in the order of the candidate pairs ([`candidates::candidate_pairs`]) that
-    /// found it, in the contact stage ([`PairSolver::find_touching`]): its warm start is
-    /// found by walking the last substep's rows in that order ([`warm`]). `u32::MAX`
-    /// elsewhere.
+    /// In the contact stage ([`PairSolver::find_touching`]), the pair's place in the
+    /// standing candidates followed by the strays' pairs (the standing pairs of strays,
+    /// which are left out, counted too): its warm start is found by walking the last
+    /// substep's rows in that order ([`warm`]). `u32::MAX` elsewhere.
     at: u32,
 }
 

@@ -764,108 +764,180 @@ fn start_pool() {
     bevy_tasks::ComputeTaskPool::get_or_init(bevy_tasks::TaskPool::default);
 }
 
+/// One substep's next rows of one kind for the warm-start test: each row (key, place)
+/// kept in place, ended, or moved to the end (a stray's pair); rows begun beside a kept
+/// one, at its place; with `reshuffle`, the order shuffled and the places renumbered (the
+/// candidates found afresh). Places ascend. `fresh` makes a new key from a kept one.
+fn next_warm_rows(
+    rows: &[((u64, u64), u32)],
+    uniform: &mut impl FnMut() -> f32,
+    reshuffle: bool,
+    fresh: impl Fn((u64, u64), f32) -> (u64, u64),
+) -> Vec<((u64, u64), u32)> {
+    let mut next = Vec::new();
+    let mut moved = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for &(k, place) in rows {
+        let u = uniform();
+        if u < 0.03 || !seen.insert(k) {
+            continue; // ended
+        }
+        if u < 0.05 {
+            moved.push(k);
+            continue;
+        }
+        next.push((k, place));
+        let new = fresh(k, uniform());
+        if uniform() < 0.03 && seen.insert(new) {
+            next.push((new, place)); // begun beside it
+        }
+    }
+    let mut last = next.last().map_or(0, |r| r.1);
+    if reshuffle {
+        for i in (1..next.len()).rev() {
+            let j = (uniform() * (i + 1) as f32) as usize % (i + 1);
+            next.swap(i, j);
+        }
+        last = 0;
+        for r in next.iter_mut() {
+            last += (uniform() * 3.0) as u32;
+            r.1 = last;
+        }
+    }
+    for k in moved {
+        last += 1;
+        next.push((k, last));
+    }
+    next
+}
+
 /// The warm-start impulses that a substep's rows find are what a map from key to the last
-/// substep's impulse gives, however the rows change: over 300 substeps of random pair
-/// rows (contacts kept, ended and begun, rows moved to the end as a stray's pairs are,
-/// the whole order renumbered and shuffled as when the candidates are found afresh,
-/// impulses zero or positive, impulses put back for marbles that woke, everything
-/// forgotten now and then), each row's impulse against a `HashMap`'s, and every impulse
-/// kept (what a marble falling asleep stows) against the map's contents.
+/// substep's impulse gives, however the rows change: over 300 substeps of random pair rows
+/// (one place each) and board rows (a few to a marble's place), contacts kept in place,
+/// ended and begun, rows moved to the end as a stray's pairs are, the whole order
+/// shuffled and renumbered as when the candidates are found afresh, impulses zero or
+/// positive, impulses put back for marbles that woke (for rows kept and for rows that
+/// come back), everything forgotten now and then: each row's impulse against a
+/// `HashMap`'s, and every impulse kept (what a marble falling asleep stows) against the
+/// map's contents, put-back impulses included. Rows kept in place are found by the walk,
+/// not by hashing.
 #[test]
 fn warm_start_finds_what_a_map_of_the_last_impulses_gives() {
     use super::warm::{Key, Warm};
     let mut uniform = uniform(0x7f4a_7c15);
     let mut warm = Warm::default();
     let mut reference: HashMap<Key, f32> = HashMap::new();
-    let key = |a: u64, b: u64| (a.min(b), a.max(b));
-    // This substep's rows: (key, place), places ascending.
-    let mut rows: Vec<(Key, u32)> = (0..300u64).map(|k| (key(k, k + 1), k as u32 * 2)).collect();
+    let pair = |a: u64, b: u64| (a.min(b), a.max(b));
+    // Pair keys below 1 << 20; board keys a marble and a piece with its bits flipped.
+    let mut pairs: Vec<(Key, u32)> = (0..300u64)
+        .map(|k| (pair(k, k + 1), 2 * k as u32))
+        .collect();
+    let mut boards: Vec<(Key, u32)> = (0..200u64)
+        .flat_map(|m| (0..1 + m % 3).map(move |piece| ((m, !piece), m as u32)))
+        .collect();
     let mut hits = 0usize;
     for substep in 0..300 {
-        if substep % 97 == 50 {
-            warm.clear();
-            reference.clear();
-        }
-        if substep % 7 == 3 {
-            // Marbles that woke: impulses put back, some for keys kept as well.
-            for _ in 0..5 {
-                let k = if uniform() < 0.5 && !rows.is_empty() {
-                    rows[(uniform() * rows.len() as f32) as usize % rows.len()].0
-                } else {
-                    key(1000 + (uniform() * 50.0) as u64, 2000)
-                };
+        let woke = substep % 7 == 3;
+        if woke {
+            // Marbles that woke: impulses put back for some rows kept and for rows that
+            // come back with them (a place of their own at the end).
+            for _ in 0..4 {
+                let k = pairs[(uniform() * pairs.len() as f32) as usize % pairs.len()].0;
                 let lambda = 1.0 + uniform();
                 warm.restore(k, lambda);
                 reference.insert(k, lambda);
             }
+            let back = pair(1 << 19 | substep as u64, 1 << 20);
+            let place = pairs.last().map_or(0, |r| r.1) + 1;
+            pairs.push((back, place));
+            warm.restore(back, 2.0);
+            reference.insert(back, 2.0);
+            let stowed: HashMap<Key, f32> = warm.iter().collect();
+            assert_eq!(stowed, reference, "substep {substep}: kept and put back");
+            assert_eq!(warm.iter().count(), reference.len(), "each key once");
         }
-        let keys: Vec<Key> = rows.iter().map(|r| r.0).collect();
-        let mut found = vec![0.0f32; rows.len()];
-        warm.find_pairs(&keys, rows.iter().map(|r| r.1), |k, lambda| {
-            found[k] = lambda
-        });
-        for (k, key) in keys.iter().enumerate() {
-            let expected = reference.get(key).copied().unwrap_or(0.0);
-            assert_eq!(
-                found[k].to_bits(),
-                expected.to_bits(),
-                "substep {substep}, row {k}"
-            );
-            hits += usize::from(expected > 0.0);
+        if substep % 97 == 3 {
+            warm.clear();
+            reference.clear();
+        }
+        for (rows, is_pairs) in [(&pairs, true), (&boards, false)] {
+            let keys: Vec<Key> = rows.iter().map(|r| r.0).collect();
+            let places = rows.iter().map(|r| r.1);
+            let mut found = vec![0.0f32; rows.len()];
+            let set = |k: usize, lambda: f32| found[k] = lambda;
+            if is_pairs {
+                warm.find_pairs(&keys, places, set);
+            } else {
+                warm.find_boards(&keys, places, set);
+            }
+            for (k, key) in keys.iter().enumerate() {
+                let expected = reference.get(key).copied().unwrap_or(0.0);
+                assert_eq!(
+                    found[k].to_bits(),
+                    expected.to_bits(),
+                    "substep {substep}, row {k}"
+                );
+                hits += usize::from(expected > 0.0);
+            }
         }
         // The solve's impulses, kept for the next substep.
-        let impulses: Vec<f32> = (0..rows.len())
-            .map(|_| if uniform() < 0.2 { 0.0 } else { uniform() })
-            .collect();
-        let kept = rows.iter().zip(&impulses).map(|(r, &l)| (r.0, r.1, l));
-        warm.keep(kept, std::iter::empty());
+        let mut solve = |rows: &[(Key, u32)]| -> Vec<(Key, u32, f32)> {
+            let impulse = |u: f32, v: f32| if u < 0.2 { 0.0 } else { v };
+            rows.iter()
+                .map(|r| (r.0, r.1, impulse(uniform(), uniform())))
+                .collect()
+        };
+        let (kept_pairs, kept_boards) = (solve(&pairs), solve(&boards));
+        warm.keep(kept_pairs.iter().copied(), kept_boards.iter().copied());
         reference.clear();
-        for (r, &l) in rows.iter().zip(&impulses) {
-            if l > 0.0 {
-                reference.insert(r.0, l);
+        for &(key, _, lambda) in kept_pairs.iter().chain(&kept_boards) {
+            if lambda > 0.0 {
+                reference.insert(key, lambda);
             }
         }
         let stowed: HashMap<Key, f32> = warm.iter().collect();
         assert_eq!(stowed, reference, "substep {substep}: every impulse kept");
         // The next substep's rows.
-        // (Each key once: `seen`.)
-        let mut next: Vec<(Key, u32)> = Vec::new();
-        let mut moved = Vec::new();
-        let mut seen = std::collections::HashSet::new();
-        for &(k, place) in &rows {
-            let u = uniform();
-            if u < 0.05 || !seen.insert(k) {
-                continue; // ended
-            }
-            if u < 0.08 {
-                moved.push(k); // a stray's pair, to the end
-                continue;
-            }
-            next.push((k, place));
-            let fresh = key(10_000 + (uniform() * 5000.0) as u64, k.1);
-            if uniform() < 0.05 && seen.insert(fresh) {
-                next.push((fresh, place)); // begun next to it
-            }
-        }
-        if substep % 11 == 10 {
-            // The candidates found afresh: a new order.
-            for i in (1..next.len()).rev() {
-                let j = (uniform() * (i + 1) as f32) as usize % (i + 1);
-                next.swap(i, j);
-            }
-        }
-        // Places ascending (begun rows share their neighbour's place, as a board row
-        // shares its marble's), the moved rows after them all.
-        let mut place = 0;
-        for r in next.iter_mut() {
-            place += (uniform() * 3.0) as u32;
-            r.1 = place;
-        }
-        for k in moved {
-            place += 1;
-            next.push((k, place));
-        }
-        rows = next;
+        let reshuffle = substep % 11 == 10;
+        let fresh_pair = |k: Key, u: f32| pair(1 << 21 | (u * 4000.0) as u64, k.1);
+        pairs = next_warm_rows(&pairs, &mut uniform, reshuffle, fresh_pair);
+        let fresh_piece = |k: Key, u: f32| (k.0, !(8 + (u * 4000.0) as u64));
+        boards = next_warm_rows(&boards, &mut uniform, reshuffle, fresh_piece);
     }
-    assert!(hits > 10_000, "{hits} rows warm started");
+    assert!(hits > 50_000, "{hits} rows warm started");
+    for (kind, w) in [("pair", &warm.pairs), ("board", &warm.boards)] {
+        assert!(
+            w.walked > 4 * w.hashed,
+            "{kind} rows: {} walked, {} hashed",
+            w.walked,
+            w.hashed
+        );
+    }
+}
+
+/// In a pile the warm start finds most impulses by walking the last substep's rows, not by
+/// hashing: the rows' places (`Row::at`, each board row's marble) are set and follow the
+/// rows from substep to substep. Bench scene (b) with 300 marbles at 3 substeps, its
+/// first second (the pile forms at about half a second).
+#[test]
+fn a_pile_warm_starts_by_walking_its_rows() {
+    let mut scene = crate::scenes::pour_box(300);
+    scene.substeps = 3;
+    let mut sim = crate::simulation::Simulation::from_scene(&scene).unwrap();
+    for _ in 0..60 {
+        sim.step();
+    }
+    let warm = &sim.world().resource::<PairSolver>().warm;
+    for (kind, w) in [("pair", &warm.pairs), ("board", &warm.boards)] {
+        eprintln!(
+            "{kind} rows warm started: {} walked, {} hashed",
+            w.walked, w.hashed
+        );
+        assert!(
+            w.walked > 5_000 && w.walked > 5 * w.hashed,
+            "{kind} rows: {} walked, {} hashed",
+            w.walked,
+            w.hashed
+        );
+    }
 }

@@ -1,7 +1,7 @@
 //! The contact impulses kept from one substep to the next for warm starting, by key.
 //!
 //! A substep's rows come in nearly the order of the substep before: the pair rows in the
-//! order of the candidate pairs, which stand from one cover of the broad phase to the next,
+//! order of the candidate pairs, which stand until the broad phase's bounds are rebuilt,
 //! the board rows in the marbles' order. So the impulses are kept as the last substep's
 //! rows left them, each with its row's place in that order (a pair's place among the
 //! candidate pairs, a board row's marble), and each row finds its own by walking them
@@ -9,7 +9,8 @@
 //! probe at a random place (in a 10,000-marble pile, 35,000 pair rows a substep). Only the
 //! rows that walk misses (new contacts, rows of the strays, every row once the candidates
 //! are found afresh) are looked up by hashing, among the kept entries the walk did not
-//! match.
+//! match. A place's kept entries are searched at most [`SAME_PLACE`] deep, so that rows
+//! given one place (which no caller does) cost a hash lookup each, not a walk of them all.
 //!
 //! What a key finds is what a map from key to the last substep's impulse gives: a row is
 //! matched only to a kept entry of its own key, every kept entry the walk does not match
@@ -21,6 +22,10 @@ use super::KeyMap;
 /// entity bits and a board piece's id with its bits flipped (never a pair's).
 pub(crate) type Key = (u64, u64);
 
+/// How many kept entries of one place the walk compares with a row's key: a pair's place
+/// holds one, a board row's marble a few.
+const SAME_PLACE: usize = 16;
+
 /// The impulses of both kinds of rows, pairs and board contacts, and those put back for
 /// marbles that woke.
 #[derive(Default, Debug)]
@@ -29,7 +34,8 @@ pub(crate) struct Warm {
     pub(super) boards: WarmImpulses,
     /// Impulses put back for marbles that woke ([`Warm::restore`]): they win over a kept
     /// entry of the same key, and are forgotten with the kept entries when the next solve
-    /// keeps its own ([`Warm::keep`]).
+    /// keeps its own ([`Warm::keep`]). Not sized in advance: it grows to the largest group
+    /// woken at once and keeps that room, as the sleeping marbles' store does.
     restored: KeyMap,
 }
 
@@ -109,6 +115,11 @@ pub(crate) struct WarmImpulses {
     matched: Vec<bool>,
     misses: Vec<u32>,
     rest: KeyMap,
+    /// Test only: impulses found by the walk and by hashing.
+    #[cfg(test)]
+    pub(super) walked: usize,
+    #[cfg(test)]
+    pub(super) hashed: usize,
 }
 
 impl WarmImpulses {
@@ -152,7 +163,7 @@ impl WarmImpulses {
                 cursor += 1;
             }
             let same_place = self.places[cursor..].iter().take_while(|&&p| p == place);
-            match same_place
+            match (same_place.take(SAME_PLACE))
                 .zip(&self.keys[cursor..])
                 .position(|(_, kept)| kept == key)
             {
@@ -160,6 +171,10 @@ impl WarmImpulses {
                     let at = cursor + at;
                     self.matched[at] = true;
                     found(k, self.lambdas[at]);
+                    #[cfg(test)]
+                    {
+                        self.walked += 1;
+                    }
                 }
                 None => self.misses.push(k as u32),
             }
@@ -178,6 +193,10 @@ impl WarmImpulses {
         for &k in &self.misses {
             if let Some(&lambda) = self.rest.get(&keys[k as usize]) {
                 found(k as usize, lambda);
+                #[cfg(test)]
+                {
+                    self.hashed += 1;
+                }
             }
         }
     }
