@@ -401,6 +401,7 @@ impl<'a> Stage<'a> {
             [board] => gather_single(
                 board,
                 near_list,
+                0.0,
                 start.position,
                 r,
                 tol,

@@ -214,6 +214,7 @@ pub struct PairImpactStaged {
     contacts: &'static Contacts,
     more: &'static MoreContacts,
     acceleration: &'static Acceleration,
+    near: &'static NearPieces,
 }
 
 /// Before integration: the touching pairs of [`crate::pairs`] (collisions at the start,
@@ -539,7 +540,9 @@ pub fn pair_impacts(
     }
     solver.end_board_touches();
     // 4. Collide, and write back what changed.
-    solver.resolve_impacts(&params, &cache.boards, &mut recorded);
+    // (Detection left every marble's list fresh for this substep, or empty.)
+    let near = |entity| marbles.get(entity).ok().map(|m| m.near);
+    solver.resolve_impacts(&params, &cache.boards, &near, &mut recorded);
     for (k, mut m) in (0usize..).zip(&mut marbles) {
         let Some(body) = solver.changed_body(k) else {
             continue;

@@ -328,12 +328,12 @@ impl Sweep {
     }
 }
 
-/// Whether a marble at the start of `path` (at time 0 of the substep), shown `clear` of
-/// `board`, the scene's only board, by its list `near` (the clearance
-/// [`gather_single`](super::gather_single) returns), stays clear for the whole `span`:
-/// the list covers the path, and `clear` exceeds what the marble can close on any piece
-/// in the span, with `tol` to spare. Then [`earliest_impact`] finds no impact, skipping
-/// the board on this same test, bit for bit.
+/// Whether a marble at the start of `path` (time `path.t0` of the substep), shown `clear`
+/// of `board`, the scene's only board, by its list `near` there (the clearance
+/// [`gather_single`](super::gather_single) returns at that time and centre), stays clear
+/// for the whole `span`: the list covers the path, and `clear` exceeds what the marble
+/// can close on any piece in the span, with `tol` to spare. Then [`earliest_impact`]
+/// finds no impact, skipping the board on this same test, bit for bit.
 pub(crate) fn path_is_clear(
     board: &BoardSnapshot,
     near: &NearPieces,
@@ -343,7 +343,6 @@ pub(crate) fn path_is_clear(
     tol: f32,
     clear: f32,
 ) -> bool {
-    debug_assert_eq!(path.t0, 0.0, "the clearance is the substep's start's");
     let bounds = PathBounds::new(path, span, r, tol);
     let sweep = Sweep::new(board, path, span, bounds.marble_speed);
     sweep.covered(near, path, bounds.end, bounds.bulge, span, tol)

@@ -267,7 +267,7 @@ pub fn gather(
     }
 }
 
-/// [`gather`] at the substep's start (`t` = 0) in a scene of one board, `b`: the list's
+/// [`gather`] at time `t` of the substep in a scene of one board, `b`: the list's
 /// clearance ([`NearPieces::clearance`]) when the list covers the centre and shows the
 /// marble clear of every piece by more than `tol`, so that nothing was visited (`out`
 /// empty); `None` when the board was searched, or is out of reach.
@@ -279,6 +279,7 @@ pub fn gather(
 pub(crate) fn gather_single(
     b: &BoardSnapshot,
     near: &NearPieces,
+    t: f32,
     x: Vec3,
     r: f32,
     tol: f32,
@@ -292,7 +293,7 @@ pub(crate) fn gather_single(
         0,
         b,
         Some(near),
-        0.0,
+        t,
         x,
         r,
         tol,

@@ -269,23 +269,30 @@ impl PairSolver {
     ///
     /// Each marble's search depends on that marble alone: with `parallel`, the marbles
     /// are cut into chunks on the task pool, with the same bits.
-    pub(super) fn onto_boards(&mut self, p: &PairParams, boards: &[BoardSnapshot]) {
+    pub(super) fn onto_boards(
+        &mut self,
+        p: &PairParams,
+        boards: &[BoardSnapshot],
+        near: &NearOf<'_>,
+    ) {
         let rows = (
             self.bodies.as_mut_slice(),
             self.changed.as_slice(),
             self.event.as_mut_slice(),
         );
         crate::systems::run_rows(rows, self.on_pool, |(bodies, changed, event)| {
-            onto_boards_of(p, boards, bodies, changed, event);
+            onto_boards_of(p, boards, near, bodies, changed, event);
         });
     }
 }
 
 /// [`PairSolver::onto_boards`] for `bodies`, with their `changed` marks and `event`
-/// times.
+/// times, each marble's board searches through its near-piece list (`near`) where it has
+/// one.
 fn onto_boards_of(
     p: &PairParams,
     boards: &[BoardSnapshot],
+    near: &NearOf<'_>,
     bodies: &mut [Body],
     changed: &[bool],
     event: &mut [f32],
@@ -301,13 +308,32 @@ fn onto_boards_of(
             ..Material::default()
         };
         let r = b.r;
+        let list = near(b.entity);
         // The boards within touching distance of centre `x` moving at `v`, at time `t`.
         let gather = |t: f32, x: Vec3, v: Vec3, out: &mut TouchList| {
-            crate::board_contact::gather(boards, None, t, x, r, tol, &material, -v, out);
+            crate::board_contact::gather(boards, list, t, x, r, tol, &material, -v, out);
         };
         let mut t0 = event[k].min(p.h);
         let mut start = b.x - b.v * (p.h - t0);
-        gather(t0, start, b.v, &mut touching);
+        // With one board, the clearance the list shows when it shows the marble clear of
+        // the board there (as detection asks it).
+        let mut clear = match (boards, list) {
+            ([board], Some(list)) => crate::board_contact::gather_single(
+                board,
+                list,
+                t0,
+                start,
+                r,
+                tol,
+                &material,
+                -b.v,
+                &mut touching,
+            ),
+            _ => {
+                gather(t0, start, b.v, &mut touching);
+                None
+            }
+        };
         for _ in 0..BOARD_IMPACTS {
             let path = Path {
                 t0,
@@ -315,9 +341,16 @@ fn onto_boards_of(
                 v: b.v,
                 a: Vec3::ZERO,
             };
+            // Clear of the scene's only board for the rest of the substep by its list's
+            // word: the search would skip the board on this same test.
+            if let (Some(clear), [board], Some(list)) = (clear.take(), boards, list)
+                && crate::board_contact::path_is_clear(board, list, &path, p.h - t0, r, tol, clear)
+            {
+                break;
+            }
             let Some((tau, piece)) = crate::board_contact::earliest_impact(
                 boards,
-                None,
+                list,
                 &path,
                 p.h - t0,
                 b.r,

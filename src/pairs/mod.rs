@@ -52,7 +52,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use bevy_ecs::prelude::*;
 use glam::{IVec3, Mat4, Vec3, Vec4};
 
-use crate::board_contact::{BoardSnapshot, Material, Path, TouchList};
+use crate::board_contact::{BoardSnapshot, Material, NearPieces, Path, TouchList};
 use crate::components::ContactKind;
 use crate::geometry::PieceId;
 
@@ -76,6 +76,10 @@ use narrow::{
 use rows::{BoardGs, ColourSpan, PairGs, RowBlock, Vel, accumulate, larger};
 use solve::BoardPush;
 use warm::Warm;
+
+/// A marble's [`NearPieces`] list by its entity, where it has one: how the searches of
+/// the boards after collisions reach the lists the marbles keep as components.
+pub type NearOf<'a> = dyn Fn(Entity) -> Option<&'a NearPieces> + Sync + 'a;
 
 /// Overlap left alone by the position projection, as a fraction of the smaller radius.
 pub const PAIR_SLOP: f32 = 2e-3;
@@ -891,11 +895,14 @@ impl PairSolver {
     /// The rest of the impact stage, after [`PairSolver::find_impacts`] found impacts,
     /// with the board contacts (this substep's): the pairs
     /// collide at their time of impact, exactly, and pass the impact on. Records the
-    /// impacts in `out`.
+    /// impacts in `out`. `near` gives a marble's [`NearPieces`] list by its entity, where
+    /// it has one, for the searches of the boards that the marbles sent off their paths
+    /// run (the same answers as searching the boards, where the list covers them).
     pub fn resolve_impacts(
         &mut self,
         p: &PairParams,
         boards: &[BoardSnapshot],
+        near: &NearOf<'_>,
         out: &mut MarbleContacts,
     ) {
         if self.collide(p, true) {
@@ -903,7 +910,7 @@ impl PairSolver {
             // boards and marbles, is found and resolved in a few rounds.
             let mut settled = false;
             for _ in 0..LATE_ROUNDS {
-                self.onto_boards(p, boards);
+                self.onto_boards(p, boards, near);
                 if !self.late_overlaps(p) {
                     settled = true;
                     break;
@@ -911,7 +918,7 @@ impl PairSolver {
             }
             if !settled {
                 // The last round's collisions may have sent marbles into boards.
-                self.onto_boards(p, boards);
+                self.onto_boards(p, boards, near);
             }
         }
         for row in &self.rows {
