@@ -350,6 +350,7 @@ impl BoardGeometry {
     }
 
     /// The piece `(part, sub)` as enumerated by [`Self::for_each_piece`].
+    #[inline]
     pub fn piece(&self, part: usize, sub: u32) -> Piece {
         match &self.parts[part].shape {
             PartShape::HalfSpace(_) => Piece::HalfSpace,

@@ -926,16 +926,18 @@ pub fn resolve_rolling(
     })
 }
 
-/// [`resolve`] in closed form for a marble riding a moving board: a marble that does not
-/// spin, touching at the substep's start the pieces in `touches` (convex pieces of the
-/// scene's only board, which moves or turns: its floor, or also a wall), `near` its
-/// near-piece list. The event loop's operations in that case, with its two searches
-/// answered by the list: continuous collision finds nothing while the list covers the
-/// path and every listed piece it does not touch is out of the path's reach at its start
-/// or within the touching tolerance (the search's own test of each, its first step), and
-/// the end of the substep finds at most the listed pieces, computed directly, while the
-/// list covers the end. `None` (and `contacts` and `touches` to be rewritten) where
-/// those fail, or the marble ends past a piece's middle: the event loop handles those.
+/// [`resolve`] in closed form for a marble riding the scene's only board: a marble that
+/// does not spin, touching at the substep's start the pieces in `touches` (convex pieces
+/// of that board, which moves or turns, or stands still: its floor, or also a wall, or a
+/// corner), `near` its near-piece list. The event loop's operations in that case, with
+/// its searches answered by the list: continuous collision finds nothing while the list
+/// covers the path and every listed piece it does not touch is out of the path's reach at
+/// its start or within the touching tolerance (the search's own test of each, its first
+/// step); on a still board that held the marble all through, the loop's end check is
+/// skipped as the loop skips it; otherwise the end of the substep finds at most the
+/// listed pieces, computed directly, while the list covers the end. `None` (and
+/// `contacts` and `touches` to be rewritten) where those fail, or the marble ends past a
+/// piece's middle: the event loop handles those.
 pub fn resolve_riding(
     boards: &[BoardSnapshot],
     near: &NearPieces,
@@ -948,7 +950,7 @@ pub fn resolve_riding(
         return None;
     };
     let start = touches.as_slice();
-    debug_assert!(m.w0.is_none() && board.is_moving());
+    debug_assert!(m.w0.is_none());
     debug_assert!(!start.is_empty() && start.iter().all(|tc| tc.convex));
     let tol = crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0);
     let hold = Hold::new(p.threshold, p.h);
@@ -977,6 +979,14 @@ pub fn resolve_riding(
         }
     }
     advance::<false>(&mut s, &motion, p.h);
+    // The loop's skip of its end check, for touches on a still board that held the
+    // marble all through the substep.
+    if p.ccd
+        && !board.is_moving()
+        && let Some(out) = held_still(p, m, hold, touches, motion, &s)
+    {
+        return Some(out);
+    }
     // Its end: the pieces again, where the board has carried it (the loop's end gather,
     // on the list).
     let held_turning = turns(touches.as_slice());
@@ -1014,6 +1024,33 @@ pub fn resolve_riding(
         touches,
         contacts,
     ))
+}
+
+/// [`resolve_riding`]'s end on a still board: where the touches it started with are all
+/// it can touch (complete), and each held the marble all through (sustained: no normal
+/// speed or acceleration leaving it), the event loop skips its end check and reports the
+/// path's end `s` as this does; `None` where it does not.
+#[inline(never)]
+fn held_still(
+    p: &SubstepParams,
+    m: &MarbleIn,
+    hold: Hold,
+    touches: &TouchList,
+    motion: Motion,
+    s: &State,
+) -> Option<MarbleOut> {
+    let list = touches.as_slice();
+    let sep = hold.speed;
+    let held = touches.is_complete()
+        && list.iter().all(|tc| {
+            tc.convex
+                && (s.v - tc.board_velocity).dot(tc.normal) <= sep
+                && motion.a.dot(tc.normal) >= 0.0
+        });
+    held.then(|| {
+        let (v, w) = reported::<false>(list, s, m.a, hold.within(0.0), motion, motion, p);
+        MarbleOut { d: s.d, v, w }
+    })
 }
 
 /// From the integrator's reported velocity and spin to the path's, for a marble that

@@ -62,7 +62,8 @@ const NEAR_SKIN: f32 = 4.0;
 /// first impact along its free path (`ccd`) or its overlap at the end of the path (no
 /// `ccd`). Marbles with anything to resolve are flagged for the response stage, except
 /// those resting or sliding on one piece with nothing else near ([`resolve_resting`]),
-/// and those riding a moving board whose list answers their substep's searches
+/// and those that do not spin on the scene's only board (riding it where it moves, on
+/// several pieces where it does not) whose list answers their substep's searches
 /// ([`resolve_riding`]), resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
 /// the substep.
 pub fn detect_board_contacts(
@@ -424,14 +425,13 @@ impl<'a> Stage<'a> {
                 None
             }
         };
-        // A marble that does not spin riding the scene's only board, which moves (on its
-        // floor, or against a wall too): in closed form where its list answers the
-        // substep's searches, else as below, the touches gathered again.
+        // A marble that does not spin on the scene's only board, moving or still (on its
+        // floor, against a wall too, in a corner): in closed form where its list answers
+        // the substep's searches, else as below, the touches gathered again.
         if let Some(list) = near
             && w0.is_none()
             && !touches.is_empty()
             && boards.len() == 1
-            && boards[0].is_moving()
             && touches.as_slice().iter().all(|tc| tc.convex)
         {
             let marble = MarbleIn {

@@ -43,8 +43,9 @@
 //! ([`NearPieces::lone_touch`]; in closed form over a flat face), and a marble resting or
 //! sliding there is resolved in closed form ([`crate::response::resolve_resting`]; a
 //! spinning one by the event loop on that one touch): no search at all in the commonest
-//! case. On a moving board the list answers the searches of a marble riding one piece
-//! ([`crate::response::resolve_riding`]) while it covers the marble's path.
+//! case. On the scene's only board, moving or still, the list answers the searches of a
+//! marble riding it, on one piece or several ([`crate::response::resolve_riding`]), while
+//! it covers the marble's path.
 
 use std::sync::Arc;
 
