@@ -91,6 +91,37 @@ pub(super) fn hash_cell(c: IVec3) -> u32 {
         ^ (c.z as u32).wrapping_mul(HASH[2])
 }
 
+/// [`hash_cell`] of cell `c`, and of each of its [`FORWARD`] neighbours in that order,
+/// from the three per-axis terms of each axis (each multiplied once).
+#[inline(always)]
+pub(super) fn forward_hashes(c: IVec3) -> (u32, [u32; 13]) {
+    let terms =
+        |c: i32, m: u32| [-1, 0, 1].map(|d: i32| (c.wrapping_add(d) as u32).wrapping_mul(m));
+    let ([_, x1, x2], [y0, y1, y2], [z0, z1, z2]) = (
+        terms(c.x, HASH[0]),
+        terms(c.y, HASH[1]),
+        terms(c.z, HASH[2]),
+    );
+    let (a, b) = (x2 ^ y0, x2 ^ y1);
+    let (e, g) = (x2 ^ y2, x1 ^ y2);
+    let forward = [
+        a ^ z0,
+        a ^ z1,
+        a ^ z2,
+        b ^ z0,
+        b ^ z1,
+        b ^ z2,
+        e ^ z0,
+        e ^ z1,
+        e ^ z2,
+        g ^ z0,
+        g ^ z1,
+        g ^ z2,
+        x1 ^ y1 ^ z2,
+    ];
+    (x1 ^ y1 ^ z1, forward)
+}
+
 impl Grid {
     /// Sizes the buffers for `n` bodies.
     pub(crate) fn reserve(&mut self, n: usize) {
@@ -288,27 +319,27 @@ impl Grid {
             }
             Some(_) => self.pairs_by_bucket_of(slots, f),
             None => {
-                let terms = |c: i32, m: u32| {
-                    [-1, 0, 1].map(|d: i32| (c.wrapping_add(d) as u32).wrapping_mul(m))
-                };
+                // Every masked hash's bucket range is in the table (`mask + 2` starts).
+                let mask = self.mask;
+                let start = &self.start[..mask as usize + 2];
                 for p in slots {
                     let c = self.cells[p];
                     let bp = self.bounds[p];
-                    let (hx, hy, hz) = (
-                        terms(c.x, HASH[0]),
-                        terms(c.y, HASH[1]),
-                        terms(c.z, HASH[2]),
-                    );
-                    for q in p + 1..self.bucket_range(c).end {
+                    let (own, hashes) = forward_hashes(c);
+                    let own = own & mask;
+                    for q in p + 1..start[own as usize + 1] as usize {
                         if self.cells[q] == c && near(bp, self.bounds[q]) {
                             f(self.order[p], self.order[q]);
                         }
                     }
-                    for d in &FORWARD {
+                    for (d, h) in FORWARD.iter().zip(hashes) {
+                        let h = (h & mask) as usize;
+                        let bucket = start[h] as usize..start[h + 1] as usize;
+                        if bucket.is_empty() {
+                            continue;
+                        }
                         let cd = c.wrapping_add(*d);
-                        let [i, j, k] = (*d + IVec3::ONE).to_array().map(|v| v as usize);
-                        let h = ((hx[i] ^ hy[j] ^ hz[k]) & self.mask) as usize;
-                        for q in self.start[h] as usize..self.start[h + 1] as usize {
+                        for q in bucket {
                             if self.cells[q] == cd && near(bp, self.bounds[q]) {
                                 f(self.order[p], self.order[q]);
                             }

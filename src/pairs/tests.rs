@@ -500,6 +500,34 @@ fn grid_pairs_keep_the_bucket_walk_order() {
     );
 }
 
+/// The hashes of a cell and its forward neighbours, taken from per-axis terms, are the
+/// cells' own hashes, in [`grid::FORWARD`]'s order, for cells anywhere (at `i32`'s ends
+/// the neighbours' indices wrap, as `IVec3::wrapping_add` wraps them).
+#[test]
+fn forward_hashes_are_the_neighbours_hashes() {
+    let mut rnd = uniform(777);
+    let ends = [i32::MIN, i32::MIN + 1, -1, 0, 1, i32::MAX - 1, i32::MAX];
+    for case in 0..2000 {
+        let pick = |r: f32| {
+            if case % 3 == 0 {
+                ends[(r * ends.len() as f32) as usize % ends.len()]
+            } else {
+                ((r - 0.5) * 2.0e6) as i32
+            }
+        };
+        let c = IVec3::new(pick(rnd()), pick(rnd()), pick(rnd()));
+        let (own, forward) = grid::forward_hashes(c);
+        assert_eq!(own, grid::hash_cell(c), "cell {c}");
+        for (d, h) in grid::FORWARD.iter().zip(forward) {
+            assert_eq!(
+                h,
+                grid::hash_cell(c.wrapping_add(*d)),
+                "cell {c}, neighbour {d}"
+            );
+        }
+    }
+}
+
 /// Marble `k` (entity `k + 1`) at rest at `x`, radius `r`, unit mass: a body for the
 /// broad phase's tests, which read only its place and size.
 fn resting(k: usize, x: Vec3, r: f32) -> Body {
