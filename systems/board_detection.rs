@@ -62,9 +62,10 @@ const NEAR_SKIN: f32 = 4.0;
 /// first impact along its free path (`ccd`) or its overlap at the end of the path (no
 /// `ccd`). Marbles with anything to resolve are flagged for the response stage, except
 /// those resting or sliding on one piece with nothing else near ([`resolve_resting`]),
-/// and those that do not spin on the scene's only board (riding it where it moves, on
-/// several pieces where it does not) whose list answers their substep's searches
-/// ([`resolve_riding`]), resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
+/// and those that do not spin on the scene's only board (riding it where it moves; where
+/// it does not, those the closed form above leaves: against a wall, in a corner, beside
+/// another listed piece) whose list answers their substep's searches ([`resolve_riding`]),
+/// resolved here. The marble's [`NearPieces`] list is rebuilt when it no longer covers
 /// the substep.
 pub fn detect_board_contacts(
     config: Res<StepConfig>,

@@ -319,6 +319,10 @@ impl Grid {
             }
             Some(_) => self.pairs_by_bucket_of(slots, f),
             None => {
+                if slots.is_empty() {
+                    // (An empty grid has no table.)
+                    return;
+                }
                 // Every masked hash's bucket range is in the table (`mask + 2` starts).
                 let mask = self.mask;
                 let start = &self.start[..mask as usize + 2];

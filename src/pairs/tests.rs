@@ -500,6 +500,26 @@ fn grid_pairs_keep_the_bucket_walk_order() {
     );
 }
 
+/// A grid built on no bodies, or never built, has no pairs and no table to read (with
+/// `parallel`, the pool's walk over the empty slots asks it all the same).
+#[test]
+fn an_empty_grid_has_no_pairs() {
+    start_pool();
+    let mut chunks = Vec::new();
+    for built in [false, true] {
+        let mut grid = Grid::default();
+        if built {
+            grid.build(&[]);
+        }
+        let mut pairs = Vec::new();
+        grid.pairs(&[], |i, j| pairs.push((i, j)));
+        grid.pairs_into(&[], &mut pairs, &mut chunks, true);
+        grid.ordinary_pairs(&mut |i, j| pairs.push((i, j)));
+        grid.query(&[], Vec4::new(0.0, 0.0, 0.0, 1.0), |j| pairs.push((j, j)));
+        assert!(pairs.is_empty(), "built {built}: {pairs:?}");
+    }
+}
+
 /// The hashes of a cell and its forward neighbours, taken from per-axis terms, are the
 /// cells' own hashes, in [`grid::FORWARD`]'s order, for cells anywhere (at `i32`'s ends
 /// the neighbours' indices wrap, as `IVec3::wrapping_add` wraps them).
