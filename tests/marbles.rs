@@ -592,3 +592,45 @@ fn marble_marble_friction_follows_coulomb() {
     let slip = slip - slip.dot(n) * n;
     assert!(slip.length() < 5e-3 * s0, "slip {slip} after t_s");
 }
+
+/// Marble collisions on with no marble to step: a scene without marbles (with a board and
+/// without), and one whose only marbles are despawned after their pairs were found, step
+/// on with nothing to do.
+#[test]
+fn marble_collisions_step_with_no_marble() {
+    for boards in [
+        Vec::new(),
+        vec![BoardDesc::new(ShapeDesc::Plane(PlaneDesc {}))],
+    ] {
+        let scene = Scene {
+            boards,
+            ..space(1.0 / 60.0)
+        };
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        for _ in 0..10 {
+            sim.step();
+        }
+        assert!(sim.marbles().is_empty());
+    }
+    let mut scene = space(1.0 / 60.0);
+    scene.marbles = vec![
+        marble([0.0, 0.0, 0.0], [0.1, 0.0, 0.0], 0.005, 0.5),
+        marble([2.5 * R, 0.0, 0.0], [0.0; 3], 0.005, 0.5),
+    ];
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..5 {
+        sim.step();
+    }
+    for m in sim.marbles().to_vec() {
+        sim.world_mut().despawn(m);
+    }
+    for _ in 0..5 {
+        sim.step();
+    }
+    let left = sim
+        .world_mut()
+        .query_filtered::<(), bevy_ecs::query::With<Marble>>()
+        .iter(sim.world())
+        .count();
+    assert_eq!(left, 0);
+}
