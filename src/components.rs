@@ -107,8 +107,8 @@ impl Default for Rotation {
 )]
 pub struct Marble;
 
-/// The part of a marble's position that f32 could not hold: the compensation term of
-/// Kahan summation, kept so that many small steps add up exactly. Far from the origin (at
+/// The part of a marble's (or a moving board's) position that f32 could not hold: the
+/// compensation term of Kahan summation, kept so that many small steps add up exactly. Far from the origin (at
 /// 10 km an f32 resolves 1 mm) or at tiny steps (1e-6 s moves a marble a fraction of an
 /// f32 ulp), plain accumulation would lose most of the motion. The position is
 /// `Position − PositionCarry` to about an ulp of the carry; writing `Position` directly is
@@ -141,7 +141,8 @@ pub fn compensated_add(compensated: bool, sum: Vec3, carry: Vec3, delta: Vec3) -
     Velocity,
     AngularVelocity,
     Restitution,
-    Friction
+    Friction,
+    PositionCarry
 )]
 pub struct Board;
 

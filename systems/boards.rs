@@ -6,8 +6,8 @@ use parry3d::bounding_volume::Aabb;
 
 use crate::board_contact::{BoardCache, BoardSnapshot};
 use crate::components::{
-    AngularVelocity, Board, Collider, Friction, NextPose, Position, Quarantined, Restitution,
-    RollingResistance, Rotation, SpinDamping, Velocity,
+    AngularVelocity, Board, Collider, Friction, NextPose, Position, PositionCarry, Quarantined,
+    Restitution, RollingResistance, Rotation, SpinDamping, Velocity, compensated_add,
 };
 use crate::config::{StepConfig, Substep};
 use crate::geometry::transform_aabb;
@@ -86,18 +86,34 @@ pub fn prepare_boards(
     cache.update_epoch();
 }
 
-/// Advances every board by its linear and angular velocity over the substep.
+/// Advances every board by its linear and angular velocity over the substep (its position
+/// by compensated summation, as a marble's: a board moving for minutes stays on its path
+/// to f32's resolution).
 pub fn move_boards(
+    config: Res<StepConfig>,
     substep: Res<Substep>,
     mut boards: Query<
-        (&mut Position, &mut Rotation, &Velocity, &AngularVelocity),
+        (
+            &mut Position,
+            Option<&mut PositionCarry>,
+            &mut Rotation,
+            &Velocity,
+            &AngularVelocity,
+        ),
         (With<Board>, Without<Quarantined>),
     >,
 ) {
     let h = substep.h;
-    for (mut position, mut rotation, velocity, angular) in &mut boards {
+    for (mut position, carry, mut rotation, velocity, angular) in &mut boards {
         if velocity.0 != Vec3::ZERO {
-            position.0 += velocity.0 * h;
+            let moved = velocity.0 * h;
+            match carry {
+                Some(mut carry) => {
+                    let (sum, c) = compensated_add(config.compensated, position.0, carry.0, moved);
+                    (position.0, carry.0) = (sum, c);
+                }
+                None => position.0 += moved,
+            }
         }
         if angular.0 != Vec3::ZERO {
             rotation.0 = (Quat::from_scaled_axis(angular.0 * h) * rotation.0).normalize();
