@@ -249,7 +249,6 @@ fn resolve_with<const SPINS: bool>(
 ) -> MarbleOut {
     let tol = crate::board_contact::touch_tolerance(p.tolerance, m.r, m.x0);
     let hold = Hold::new(p.threshold, p.h);
-    let sep = hold.speed;
     let offset = |a: Vec3| p.integrator.velocity_offset(a, p.h);
     let mut t = 0.0f32;
     let mut s = State {
@@ -406,24 +405,9 @@ fn resolve_with<const SPINS: bool>(
     if p.ccd
         && settled_start
         && t >= p.h
-        && touches.is_complete()
-        && touches.as_slice().iter().all(|tc| {
-            tc.convex
-                && !boards[tc.piece.board()].is_moving()
-                && (s.v - tc.board_velocity).dot(tc.normal) <= sep
-                && motion.a.dot(tc.normal) >= 0.0
-        })
+        && let Some(out) = held_still::<SPINS>(boards, p, m, hold, touches, motion, &s)
     {
-        let (v, w) = reported::<SPINS>(
-            touches.as_slice(),
-            &s,
-            m.a,
-            hold.within(0.0),
-            motion,
-            motion,
-            p,
-        );
-        return MarbleOut { d: s.d, v, w };
+        return out;
     }
 
     // End of substep: resolve what still overlaps, or touches while approaching.
@@ -983,7 +967,7 @@ pub fn resolve_riding(
     // marble all through the substep.
     if p.ccd
         && !board.is_moving()
-        && let Some(out) = held_still(p, m, hold, touches, motion, &s)
+        && let Some(out) = held_still::<false>(boards, p, m, hold, touches, motion, &s)
     {
         return Some(out);
     }
@@ -1026,12 +1010,15 @@ pub fn resolve_riding(
     ))
 }
 
-/// [`resolve_riding`]'s end on a still board: where the touches it started with are all
-/// it can touch (complete), and each held the marble all through (sustained: no normal
-/// speed or acceleration leaving it), the event loop skips its end check and reports the
-/// path's end `s` as this does; `None` where it does not.
+/// The event loop's skip of its end-of-substep check (for [`resolve_with`], and
+/// [`resolve_riding`] on a still board), for a marble that spent the whole substep on the
+/// touches it started with: where those are all it can touch (complete), each convex, on
+/// a still board and holding it all through (sustained: no normal speed or acceleration
+/// leaving it), the path's end `s` is reported as it stands; `None` where the check must
+/// run.
 #[inline(never)]
-fn held_still(
+fn held_still<const SPINS: bool>(
+    boards: &[BoardSnapshot],
     p: &SubstepParams,
     m: &MarbleIn,
     hold: Hold,
@@ -1044,11 +1031,12 @@ fn held_still(
     let held = touches.is_complete()
         && list.iter().all(|tc| {
             tc.convex
+                && !boards[tc.piece.board()].is_moving()
                 && (s.v - tc.board_velocity).dot(tc.normal) <= sep
                 && motion.a.dot(tc.normal) >= 0.0
         });
     held.then(|| {
-        let (v, w) = reported::<false>(list, s, m.a, hold.within(0.0), motion, motion, p);
+        let (v, w) = reported::<SPINS>(list, s, m.a, hold.within(0.0), motion, motion, p);
         MarbleOut { d: s.d, v, w }
     })
 }
