@@ -109,8 +109,8 @@ pub fn move_boards(
             let moved = velocity.0 * h;
             match carry {
                 Some(mut carry) => {
-                    let (sum, c) = compensated_add(config.compensated, position.0, carry.0, moved);
-                    (position.0, carry.0) = (sum, c);
+                    (position.0, carry.0) =
+                        compensated_add(config.compensated, position.0, carry.0, moved);
                 }
                 None => position.0 += moved,
             }
