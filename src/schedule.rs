@@ -123,8 +123,12 @@ pub fn substep_schedule() -> Schedule {
             .run_if(sleep::first_substep)
             .in_set(MarbleSystems::Wake),
         forces::accumulate_forces.in_set(MarbleSystems::AccumulateForces),
-        pairs::pair_contacts
-            .run_if(collisions)
+        (
+            pairs::forget_stale_contacts.run_if(collisions),
+            pairs::pair_contacts.run_if(collisions),
+            pairs::forget_pairs.run_if(not(collisions)),
+        )
+            .chain()
             .in_set(MarbleSystems::PairContacts),
         (
             board_detection::detect_board_contacts,

@@ -83,6 +83,11 @@ pub fn prepare_boards(
             .with_poses(h),
         );
     }
+    // By entity, not the query's order: a board that gains or loses a component (a
+    // `NextPose` each step) moves to another table, which would reorder the list, and the
+    // marbles' recorded contacts and near-piece lists name pieces by their board's place
+    // in it.
+    cache.boards.sort_unstable_by_key(|b| b.entity);
     cache.update_epoch();
 }
 

@@ -217,6 +217,35 @@ pub struct PairImpactStaged {
     near: &'static NearPieces,
 }
 
+/// First in the contact stage, when the board list has changed since its last substep (a
+/// board added, removed or given another shape): the marbles' board contacts of the last
+/// substep name their pieces by place in the old list, so they are dropped (detection
+/// records this substep's afresh), and so are the impulses kept for warm starting
+/// ([`PairSolver::boards_unchanged`]). The contact stage then finds the pieces each marble
+/// touches through its speculative board rows, as in a first substep.
+pub fn forget_stale_contacts(
+    cache: Res<BoardCache>,
+    mut solver: ResMut<PairSolver>,
+    mut marbles: Query<&mut Contacts, Stepped>,
+) {
+    if solver.boards_unchanged(cache.epoch) {
+        return;
+    }
+    for mut contacts in &mut marbles {
+        contacts.clear();
+    }
+}
+
+/// With `marble_collisions` off: no pair touches, so the touching pairs recorded while it
+/// was on are dropped (events, diagnostics and replays read them), and the contact stage
+/// starts afresh once it is on again ([`PairSolver::pause`]).
+pub fn forget_pairs(mut recorded: ResMut<MarbleContacts>, mut solver: ResMut<PairSolver>) {
+    if !recorded.list.is_empty() {
+        recorded.list.clear();
+    }
+    solver.pause();
+}
+
 /// Before integration: the touching pairs of [`crate::pairs`] (collisions at the start,
 /// contact forces added to the marbles' acceleration, overlap projected out). Runs only
 /// with `marble_collisions` on.

@@ -626,3 +626,50 @@ fn the_plugin_group_leaves_parts_out() {
     app.finish();
     assert!(!app.world().resource::<StepConfig>().events);
 }
+
+/// Marble collisions turned off right after two marbles met: the impact is not reported
+/// again, and their contact ends at the next step (the pair stages no longer run, so no
+/// pair is touching).
+#[test]
+fn turning_marble_collisions_off_ends_their_pairs() {
+    let mut app = recording_app(DT);
+    {
+        let mut config = app.world_mut().resource_mut::<StepConfig>();
+        config.gravity = Vec3::ZERO;
+        config.marble_collisions = true;
+    }
+    let u = 0.5;
+    let a = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Position(Vec3::new(-0.05, 0.0, 0.0)),
+            Velocity(Vec3::X * u),
+        ))
+        .id();
+    let b = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Position(Vec3::new(0.05, 0.0, 0.0)),
+            Velocity(-Vec3::X * u),
+        ))
+        .id();
+    let mut steps = 0;
+    while app.world().resource::<Seen>().impacts.is_empty() {
+        app.update();
+        steps += 1;
+        assert!(steps < 16, "the marbles never met");
+    }
+    app.world_mut()
+        .resource_mut::<StepConfig>()
+        .marble_collisions = false;
+    for _ in 0..8 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    assert_eq!(seen.impacts.len(), 1, "{:?}", seen.impacts);
+    let (marble, other) = (seen.impacts[0].marble, seen.impacts[0].other);
+    assert!((marble, other) == (a, b) || (marble, other) == (b, a));
+    assert_eq!(seen.ended, vec![ContactEnded { marble, other }]);
+}

@@ -493,3 +493,44 @@ fn a_moving_board_follows_its_path() {
         }
     }
 }
+
+/// A board driven by `NextPose` at every step (a game's tilt) gains and loses the component
+/// each step, which moves it between tables; the board list keeps its order all the same,
+/// so its epoch stands (the marbles' near-piece lists and recorded contacts name pieces
+/// by their board's place in it: a new epoch rebuilds the lists and drops the contact
+/// solver's warm start).
+#[test]
+fn a_driven_board_keeps_its_place_in_the_board_list() {
+    let mut wall = BoardDesc::new(ShapeDesc::Cuboid {
+        half_extents: [0.01, 0.05, 0.2],
+    });
+    wall.position = [0.3, 0.05, 0.0];
+    let scene = Scene {
+        dt: 1.0 / 60.0,
+        marble_collisions: true,
+        boards: vec![BoardDesc::new(ShapeDesc::Plane(PlaneDesc {})), wall],
+        marbles: vec![
+            MarbleDesc::at([0.0, R, 0.0]),
+            MarbleDesc::at([2.0 * R, R, 0.0]),
+        ],
+        ..Scene::default()
+    };
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    sim.step();
+    let epoch = |sim: &Simulation| {
+        sim.world()
+            .resource::<bevy_marble::board_contact::BoardCache>()
+            .epoch
+    };
+    let before = epoch(&sim);
+    let floor = sim.boards()[0];
+    for k in 0..10 {
+        let rotation = Quat::from_rotation_x(0.001 * k as f32);
+        sim.world_mut().entity_mut(floor).insert(NextPose {
+            position: Vec3::ZERO,
+            rotation,
+        });
+        sim.step();
+        assert_eq!(epoch(&sim), before, "step {k}");
+    }
+}

@@ -634,3 +634,45 @@ fn marble_collisions_step_with_no_marble() {
         .count();
     assert_eq!(left, 0);
 }
+
+/// Two touching marbles resting on a floor, with a second floor far below; the first floor
+/// is despawned between steps, so that the second takes its place in the board list. The
+/// marbles' recorded contacts name the first floor: they must not hold the pair on the
+/// second one, so in the next step both fall freely, `Δv = −g dt` (exact for
+/// semi-implicit Euler; the pair's normal is level).
+#[test]
+fn contacts_with_a_despawned_board_hold_no_marble() {
+    let dt = 1.0 / 240.0;
+    let mut low = BoardDesc::new(ShapeDesc::Plane(PlaneDesc {}));
+    low.position = [0.0, -10.0, 0.0];
+    let scene = Scene {
+        dt,
+        marble_collisions: true,
+        boards: vec![BoardDesc::new(ShapeDesc::Plane(PlaneDesc {})), low],
+        marbles: vec![
+            MarbleDesc::at([0.0, R, 0.0]),
+            MarbleDesc::at([2.0 * R, R, 0.0]),
+        ],
+        ..Scene::default()
+    };
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..10 {
+        sim.step();
+    }
+    let marbles = sim.marbles().to_vec();
+    for &m in &marbles {
+        assert_eq!(sim.contacts(m).unwrap().len(), 1, "resting on the floor");
+    }
+    let before: Vec<Vec3> = marbles
+        .iter()
+        .map(|&m| sim.world().get::<Velocity>(m).unwrap().0)
+        .collect();
+    let floor = sim.boards()[0];
+    sim.world_mut().despawn(floor);
+    sim.step();
+    for (&m, v0) in marbles.iter().zip(before) {
+        let v = sim.world().get::<Velocity>(m).unwrap().0;
+        let expected = v0 - Vec3::Y * (9.81 * dt);
+        assert!((v - expected).length() <= 1e-6, "{v} against {expected}");
+    }
+}

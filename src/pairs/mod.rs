@@ -327,6 +327,8 @@ pub struct PairSolver {
     gather_at: usize,
     /// Set by the gather when a body's entity differs from the one in `entities`.
     entities_changed: AtomicBool,
+    /// The board list's epoch at the last contact stage ([`PairSolver::boards_unchanged`]).
+    board_epoch: Option<u32>,
     /// Per body: outside its bound at the last cover, and the list of those.
     stray: Vec<bool>,
     strays: Vec<u32>,
@@ -686,6 +688,28 @@ impl PairSolver {
     /// Drops the contact impulses kept for warm starting (no marble touches another).
     pub fn forget_contacts(&mut self) {
         self.warm.clear();
+    }
+
+    /// Marble collisions are off: the next contact stage keeps no impulse from before and
+    /// drops the marbles' recorded board contacts ([`PairSolver::boards_unchanged`] is then
+    /// false).
+    pub fn pause(&mut self) {
+        self.board_epoch = None;
+    }
+
+    /// Whether the board list is the one of the last call (its
+    /// [`epoch`](crate::board_contact::BoardCache::epoch)): the marbles' recorded board
+    /// contacts name their pieces by place in that list. When it has changed (a board
+    /// added, removed or given another shape), the kept impulses are dropped, board rows'
+    /// and pairs' alike, and the contact stage drops the recorded board contacts
+    /// (`systems::pairs::forget_stale_contacts`).
+    pub fn boards_unchanged(&mut self, epoch: u32) -> bool {
+        let same = self.board_epoch == Some(epoch);
+        if !same {
+            self.board_epoch = Some(epoch);
+            self.warm.clear();
+        }
+        same
     }
 
     /// Copies into `store` the contact impulses kept for warm starting of the marbles whose
