@@ -53,9 +53,10 @@ pub fn watching(config: Res<StepConfig>, sensors: Query<(), With<Sensor>>) -> bo
     config.events || !sensors.is_empty()
 }
 
-/// Run condition: there are sensors.
-pub fn any_sensor(sensors: Query<(), With<Sensor>>) -> bool {
-    !sensors.is_empty()
+/// Run condition: there are sensors, or marbles were inside one at the last step (the
+/// last sensor despawned, or its `Sensor` removed: they leave it).
+pub fn any_sensor(sensors: Query<(), With<Sensor>>, state: Res<EventState>) -> bool {
+    !sensors.is_empty() || !state.was_inside.is_empty()
 }
 
 /// Every substep, after the marble–board and marble–marble stages: each collision of the

@@ -673,3 +673,75 @@ fn turning_marble_collisions_off_ends_their_pairs() {
     assert!((marble, other) == (a, b) || (marble, other) == (b, a));
     assert_eq!(seen.ended, vec![ContactEnded { marble, other }]);
 }
+
+/// Two marbles resting against each other (no gravity): their contact starts once and
+/// holds while the game adds a component to one of them (which moves it to another table
+/// and so changes the order the engine steps them in).
+#[test]
+fn a_resting_pair_keeps_its_contact_when_a_marble_changes_table() {
+    #[derive(Component)]
+    struct Picked;
+    let mut app = recording_app(DT);
+    {
+        let mut config = app.world_mut().resource_mut::<StepConfig>();
+        config.gravity = Vec3::ZERO;
+        config.marble_collisions = true;
+    }
+    let r = 0.008;
+    let a = app
+        .world_mut()
+        .spawn((Marble, Position(Vec3::ZERO)))
+        .id();
+    let b = app
+        .world_mut()
+        .spawn((Marble, Position(Vec3::X * 2.0 * r)))
+        .id();
+    for _ in 0..4 {
+        app.update();
+    }
+    app.world_mut().entity_mut(a).insert(Picked);
+    for _ in 0..4 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    // A pair is reported in `Entity`'s order.
+    let (marble, other) = (a.min(b), a.max(b));
+    assert_eq!(seen.started, vec![ContactStarted { marble, other }]);
+    assert!(seen.ended.is_empty(), "{:?}", seen.ended);
+}
+
+/// A marble inside the only sensor leaves it at the next step when the sensor is despawned,
+/// and another when its sensor loses the `Sensor` component.
+#[test]
+fn a_removed_sensor_is_left() {
+    for despawn in [true, false] {
+        let mut app = recording_app(DT);
+        app.world_mut().resource_mut::<StepConfig>().gravity = Vec3::ZERO;
+        let sensor = app
+            .world_mut()
+            .spawn((
+                Sensor,
+                Collider::cuboid(Vec3::splat(0.1)).unwrap(),
+                Transform::default(),
+            ))
+            .id();
+        let marble = app.world_mut().spawn((Marble, Transform::default())).id();
+        for _ in 0..3 {
+            app.update();
+        }
+        let seen = app.world().resource::<Seen>();
+        assert_eq!(seen.entered.len(), 1);
+        let steps = seen.steps;
+        if despawn {
+            app.world_mut().despawn(sensor);
+        } else {
+            app.world_mut().entity_mut(sensor).remove::<Sensor>();
+        }
+        app.update();
+        let seen = app.world().resource::<Seen>();
+        assert_eq!(
+            seen.exited,
+            vec![(SensorExited { sensor, marble }, steps + 1)]
+        );
+    }
+}

@@ -135,9 +135,10 @@ pub struct Body {
 /// A contact between two marbles during the last substep.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MarbleContact {
-    /// The first marble.
+    /// The first marble: the pair's lower entity in `Entity`'s order (each pair is
+    /// listed in one order whatever the marbles' storage order).
     pub a: Entity,
-    /// The second marble.
+    /// The second marble, the higher entity.
     pub b: Entity,
     /// Unit normal from `a` towards `b`.
     pub normal: Vec3,
@@ -955,10 +956,17 @@ impl PairSolver {
     /// The record of a row: its pair, the end overlap, the closing speed judged and when.
     fn contact(&self, row: &Row) -> MarbleContact {
         let (a, b) = (&self.bodies[row.i as usize], &self.bodies[row.j as usize]);
+        // The lower entity first, whatever the bodies' order (tables change order when
+        // marbles gain or lose components, or others are despawned).
+        let (first, second, normal) = if a.entity <= b.entity {
+            (a.entity, b.entity, row.n)
+        } else {
+            (b.entity, a.entity, -row.n)
+        };
         MarbleContact {
-            a: a.entity,
-            b: b.entity,
-            normal: row.n,
+            a: first,
+            b: second,
+            normal,
             depth: a.r + b.r - (b.x - a.x).length(),
             closing_speed: row.u,
             kind: if row.collided {
