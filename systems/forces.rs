@@ -41,8 +41,11 @@ pub fn last_substep(substep: Res<Substep>) -> bool {
     substep.is_last()
 }
 
-/// Clears every marble's [`Force`] once the whole step has integrated it.
-pub fn clear_forces(mut forces: Query<&mut Force, (With<Marble>, Without<Sleeping>)>) {
+/// Clears every stepped marble's [`Force`] once the whole step has integrated it (a
+/// quarantined marble's is left as it is, with the rest of its state).
+pub fn clear_forces(
+    mut forces: Query<&mut Force, (With<Marble>, Without<Quarantined>, Without<Sleeping>)>,
+) {
     // Most scenes apply no force: the columns are read as slices first (the bits of each
     // component, less its sign, or-ed: zero only when every force is ±0), and only a marble
     // whose force is not zero is written (its change tick set).

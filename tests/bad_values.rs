@@ -70,12 +70,22 @@ fn quarantined_where_it_is(
     let mut sim = world();
     let bad = sim.world_mut().spawn((Marble, Position(at))).id();
     spoil(&mut sim.world_mut().entity_mut(bad));
+    // Its velocity and force, bit for bit (NaN included): left as they are.
+    let motion = |w: &bevy_ecs::world::World| {
+        let bits = |v: Option<Vec3>| v.map(|v| v.to_array().map(f32::to_bits));
+        (
+            bits(w.get::<Velocity>(bad).map(|v| v.0)),
+            bits(w.get::<Force>(bad).map(|f| f.0)),
+        )
+    };
+    let before = motion(sim.world());
     let r = step(&mut sim, 30);
     let w = sim.world();
     assert!(
         w.get::<Quarantined>(bad).is_some(),
         "{component}: not quarantined"
     );
+    assert_eq!(motion(w), before, "{component}: its velocity or force changed");
     assert_eq!(
         w.get::<Position>(bad).unwrap().0,
         at,
