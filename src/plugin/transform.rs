@@ -8,6 +8,7 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
 use bevy_ecs::system::SystemChangeTick;
 use bevy_transform::components::Transform;
+use glam::Quat;
 
 use super::MarblePluginSystems;
 use super::interpolation::{PhysicsPoses, TransformInterpolation};
@@ -20,7 +21,8 @@ use crate::components::{Board, Marble, Position, Rotation, Sensor};
 ///   rotation); given both, `Position` and `Rotation` win. (This is the components' own
 ///   spawn hook, so it holds in a plain `World` too.)
 /// - A `Transform` the program changes after spawning moves its entity there before the
-///   next physics step: a **teleport**. The marble keeps its velocity and spin (set them
+///   next physics step (one changed during the step, by an observer of the engine's
+///   events, at the step's end): a **teleport**. The marble keeps its velocity and spin (set them
 ///   too for a fresh start); its contacts are found afresh at the new place in the next
 ///   substep, a sleeping marble wakes, and an interpolated entity jumps there without a
 ///   streak. A teleported board keeps its velocity; marbles it now overlaps are pushed
@@ -50,13 +52,16 @@ impl Plugin for MarbleTransformPlugin {
 #[derive(Resource, Default, Debug)]
 pub struct TransformWrites {
     pub(super) tick: Tick,
+    /// The tick of the last [`read_transforms`]: a `Transform` changed after it and before
+    /// the write-back was changed during the step (an observer of the engine's events).
+    read: Tick,
 }
 
 /// Moves every marble, board and sensor whose `Transform` the program changed since the
 /// engine last wrote it to that `Transform` (see [`MarbleTransformPlugin`]).
 #[allow(clippy::type_complexity)]
 pub fn read_transforms(
-    writes: Res<TransformWrites>,
+    mut writes: ResMut<TransformWrites>,
     ticks: SystemChangeTick,
     mut entities: Query<
         (
@@ -84,31 +89,41 @@ pub fn read_transforms(
         if transform.is_added() || !by_program {
             continue;
         }
-        position.0 = transform.translation;
-        let mut r = None;
-        if let Some(mut rotation) = rotation {
-            // A marble's orientation is only its spin's bookkeeping; a board's and a
-            // sensor's is their pose.
-            if !marble || rotation.0 != transform.rotation {
-                rotation.0 = transform.rotation;
-            }
-            r = Some(rotation.0);
-        }
+        let r = teleport(&transform, &mut position, rotation, marble);
         if let Some(mut poses) = poses {
             poses.reset(position.0, r.unwrap_or(transform.rotation));
         }
     }
+    writes.read = ticks.this_run();
+}
+
+/// Moves an entity to the `Transform` the program gave it: its position, and the rotation
+/// it carries (returned). A marble's orientation is only its spin's bookkeeping; a
+/// board's and a sensor's is their pose.
+fn teleport(
+    transform: &Transform,
+    position: &mut Position,
+    rotation: Option<Mut<Rotation>>,
+    marble: bool,
+) -> Option<Quat> {
+    position.0 = transform.translation;
+    let mut rotation = rotation?;
+    if !marble || rotation.0 != transform.rotation {
+        rotation.0 = transform.rotation;
+    }
+    Some(rotation.0)
 }
 
 /// Writes marble positions (and orientations, for marbles that carry a `Rotation`) and
 /// board poses into their `Transform`s; entities with [`TransformInterpolation`] are left
-/// to the interpolation.
+/// to the interpolation. A `Transform` the program changed during the step (an observer
+/// of the engine's events) is a teleport, made here instead of being overwritten.
 #[allow(clippy::type_complexity)]
 pub fn sync_transforms(
     mut writes: ResMut<TransformWrites>,
     ticks: SystemChangeTick,
     mut marbles: Query<
-        (&Position, Option<&Rotation>, &mut Transform),
+        (&mut Position, Option<&mut Rotation>, &mut Transform),
         (
             With<Marble>,
             Without<Board>,
@@ -116,7 +131,7 @@ pub fn sync_transforms(
         ),
     >,
     mut boards: Query<
-        (&Position, &Rotation, &mut Transform),
+        (&mut Position, &mut Rotation, &mut Transform),
         (
             With<Board>,
             Without<Marble>,
@@ -124,15 +139,28 @@ pub fn sync_transforms(
         ),
     >,
 ) {
-    for (position, rotation, mut transform) in &mut marbles {
+    let now = ticks.this_run();
+    // Changed since the transforms were read, and not just spawned (the spawn hook read
+    // it, or `Position` won).
+    let by_program =
+        |t: &Mut<Transform>| !t.is_added() && t.last_changed().is_newer_than(writes.read, now);
+    for (mut position, rotation, mut transform) in &mut marbles {
+        if by_program(&transform) {
+            teleport(&transform, &mut position, rotation, true);
+            continue;
+        }
         transform.translation = position.0;
         if let Some(rotation) = rotation {
             transform.rotation = rotation.0;
         }
     }
-    for (position, rotation, mut transform) in &mut boards {
+    for (mut position, mut rotation, mut transform) in &mut boards {
+        if by_program(&transform) {
+            teleport(&transform, &mut position, Some(rotation), false);
+            continue;
+        }
         transform.translation = position.0;
         transform.rotation = rotation.0;
     }
-    writes.tick = ticks.this_run();
+    writes.tick = now;
 }
