@@ -89,7 +89,7 @@ impl Default for Rotation {
 /// `bevy` feature), or at the origin.
 #[derive(Component, Clone, Copy, Debug, Default)]
 #[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
-#[component(on_add = resolve_unset_pose)]
+#[component(on_add = resolve_unset_pose, on_remove = crate::sleep::note_removed_sleeper)]
 #[require(
     Position = Position::UNSET,
     Velocity,

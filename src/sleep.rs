@@ -65,6 +65,21 @@ use crate::pairs::{Grid, KeyMap};
 #[cfg(doc)]
 use crate::systems::sleep::{fall_asleep, wake};
 
+/// The `on_remove` hook of [`Marble`](crate::components::Marble): a sleeping marble
+/// despawned, or made no longer a marble, is noted where it slept, so that the marbles
+/// resting on it wake at the next step.
+pub(crate) fn note_removed_sleeper(
+    mut world: bevy_ecs::world::DeferredWorld,
+    context: bevy_ecs::lifecycle::HookContext,
+) {
+    let Some(&Sleeping { position, radius }) = world.get::<Sleeping>(context.entity) else {
+        return;
+    };
+    if let Some(mut state) = world.get_resource_mut::<SleepState>() {
+        state.removed.push(position.extend(radius));
+    }
+}
+
 /// A marble asleep: every stage skips it until something wakes it (module docs). Remove
 /// it to wake the marble by hand.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
@@ -119,6 +134,9 @@ pub struct SleepState {
     /// bits of the marbles falling asleep or waking (sorted).
     pub(crate) impulses: KeyMap,
     pub(crate) keys: Vec<u64>,
+    /// Sleeping marbles despawned (or no longer marbles) since the last step, where they
+    /// slept (centre, radius): the marbles resting on them wake.
+    pub(crate) removed: Vec<Vec4>,
     /// Set by [`wake`]: every marble sleeps, nothing woke, no board moves and gravity
     /// holds still, so the rest of the step's substeps would do nothing ([`run_step`]
     /// skips them).

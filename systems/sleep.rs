@@ -102,6 +102,7 @@ pub fn wake(
         ),
         (With<Marble>, Without<Quarantined>),
     >,
+    quarantined: Query<&Sleeping, (With<Marble>, Added<Quarantined>)>,
     mut awake: Query<
         (
             &Position,
@@ -148,6 +149,7 @@ pub fn wake(
         solver.restore_impulses(&state.keys, &mut state.impulses);
     }
     if config.sleep.is_none() {
+        state.removed.clear();
         state.gravity = None;
         state.poses.clear();
         state.keys.clear();
@@ -175,6 +177,17 @@ pub fn wake(
     let mut rearranged = cache.epoch != state.epoch;
     if rearranged {
         state.reaching.push((None, 0.0));
+    }
+    // Sleeping marbles gone since the last step (despawned, or quarantined: out of every
+    // stage, as if not there) reach the marbles that rested on them.
+    for sleeping in &quarantined {
+        state
+            .removed
+            .push(sleeping.position.extend(sleeping.radius));
+    }
+    for gone in state.removed.drain(..) {
+        let (c, r) = (gone.truncate(), Vec3::splat(gone.w));
+        state.reaching.push((Some(Aabb::new(c - r, c + r)), 0.0));
     }
     for b in &cache.boards {
         let last = state.poses.iter().find(|p| p.0 == b.entity);

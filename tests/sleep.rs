@@ -577,3 +577,34 @@ fn deepest_with(sim: &Simulation, m: bevy_ecs::entity::Entity) -> f32 {
         .fold(0.0, f32::max)
         / R
 }
+
+/// A sleeping column of two marbles on a floor: the program despawns the lower one, or
+/// spoils its velocity (quarantined, it is out of every stage). The upper one wakes and
+/// falls the 2r onto the floor, as it would awake; asleep on a marble that is gone, it
+/// would hang in the air.
+#[test]
+fn a_sleeping_marble_wakes_when_the_one_under_it_goes() {
+    for despawn in [true, false] {
+        let mut scene = resting_on_floor();
+        scene.marble_collisions = true;
+        scene.marbles.push(MarbleDesc::at([0.0, 3.0 * R, 0.0]));
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        for _ in 0..40 {
+            sim.step();
+        }
+        assert!(asleep(&sim, 0) && asleep(&sim, 1), "the column sleeps");
+        let (lower, upper) = (sim.marbles()[0], sim.marbles()[1]);
+        if despawn {
+            sim.world_mut().despawn(lower);
+        } else {
+            sim.world_mut()
+                .entity_mut(lower)
+                .insert(Velocity(Vec3::splat(f32::NAN)));
+        }
+        for _ in 0..30 {
+            sim.step();
+        }
+        let y = sim.world().get::<Position>(upper).unwrap().y;
+        assert!((y - R).abs() <= 0.01 * R, "despawn {despawn}: at {y}");
+    }
+}
