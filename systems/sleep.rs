@@ -89,7 +89,10 @@ pub fn wake(
     mut commands: Commands,
     (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
     (mut state, mut solver): (ResMut<SleepState>, ResMut<PairSolver>),
-    mut removed: RemovedComponents<Sleeping>,
+    (mut removed, quarantined): (
+        RemovedComponents<Sleeping>,
+        Query<&Sleeping, (With<Marble>, Added<Quarantined>)>,
+    ),
     mut sleepers: Query<
         (
             Entity,
@@ -102,7 +105,6 @@ pub fn wake(
         ),
         (With<Marble>, Without<Quarantined>),
     >,
-    quarantined: Query<&Sleeping, (With<Marble>, Added<Quarantined>)>,
     mut awake: Query<
         (
             &Position,
