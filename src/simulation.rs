@@ -289,6 +289,11 @@ impl Simulation {
 
     /// Position and velocity of the scene's marble `index` (in the still board's frame when
     /// the scene tilts gravity instead of its board).
+    ///
+    /// # Panics
+    ///
+    /// If `index` is not one of the scene's marbles, or the program despawned that marble
+    /// or removed its `Position` or `Velocity` (read the world for such a marble).
     pub fn marble_state(&self, index: usize) -> (Vec3, Vec3) {
         let e = self.marbles[index];
         (

@@ -78,6 +78,8 @@ pub fn validate(
                 Changed<Restitution>,
                 Changed<Friction>,
                 Changed<AngularVelocity>,
+                Changed<RollingResistance>,
+                Changed<SpinDamping>,
             )>,
         ),
     >,
@@ -92,12 +94,12 @@ pub fn validate(
     >,
     incomplete: Query<
         (Entity, Present),
-        (With<Marble>, Without<Quarantined>, Without<Sleeping>, Lacks),
+        (With<Marble>, Without<Quarantined>, Lacks),
     >,
 ) {
     // A marble without a component the stages read (removed by the program: `Marble`
-    // requires them all) would be stepped by none of them; it is quarantined like a bad
-    // value. Matched by archetype: a world with none costs nothing here.
+    // requires them all) would be stepped by none of them, or, asleep, never woken; it is
+    // quarantined like a bad value. Matched by archetype: a world with none costs nothing here.
     for (marble, present) in &incomplete {
         let component = missing_component(present).unwrap_or("Marble");
         let reason = InvalidValue {

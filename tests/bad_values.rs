@@ -721,3 +721,43 @@ fn a_bevy_app_quarantines_what_it_spawns_with_bad_values_and_logs_it() {
         );
     }
 }
+
+/// A sleeping marble that the program spoils is quarantined at the next step, as an awake
+/// one is: one missing a component (here `Force`, or `Velocity`), or given a negative
+/// rolling resistance or a non-finite spin damping.
+#[test]
+fn a_sleeping_marble_spoiled_is_quarantined() {
+    type Spoil = fn(&mut bevy_ecs::world::EntityWorldMut);
+    let cases: [(&str, Spoil); 4] = [
+        ("Force", |e| {
+            e.remove::<Force>();
+        }),
+        ("Velocity", |e| {
+            e.remove::<Velocity>();
+        }),
+        ("RollingResistance", |e| {
+            e.insert(RollingResistance(-1.0));
+        }),
+        ("SpinDamping", |e| {
+            e.insert(SpinDamping(f32::INFINITY));
+        }),
+    ];
+    for (component, spoil) in cases {
+        let mut scene = scenes::drop_on_plane(0.0, 0.008, 0.5);
+        scene.rolling = true;
+        scene.sleep_speed = 0.01;
+        scene.sleep_time = 0.25;
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        step(&mut sim, 60);
+        assert!(sim.is_asleep(0), "{component}: asleep first");
+        let m = sim.marbles()[0];
+        spoil(&mut sim.world_mut().entity_mut(m));
+        let r = step(&mut sim, 1);
+        assert!(
+            sim.world().get::<Quarantined>(m).is_some(),
+            "{component}: not quarantined"
+        );
+        assert_eq!(r.len(), 1, "{component}: {r:?}");
+        assert_eq!((r[0].entity, r[0].reason.component), (m, component));
+    }
+}
