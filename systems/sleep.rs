@@ -153,6 +153,7 @@ pub fn wake(
     if config.sleep.is_none() {
         state.removed.clear();
         state.gravity = None;
+        state.collisions = None;
         state.poses.clear();
         state.keys.clear();
         for (entity, .., drowsy) in &mut sleepers {
@@ -167,9 +168,16 @@ pub fn wake(
         return;
     }
     let g = seen_gravity(&config, tilt.as_deref());
-    let gravity_changed =
-        state.gravity.is_some_and(|old| old != g) || gravity_turns(tilt.as_deref());
+    // Gravity changed, or marble collisions turned on or off (a sleeping pile then falls
+    // through itself, or marbles asleep inside each other are pushed apart): every
+    // sleeping marble wakes.
+    let gravity_changed = state.gravity.is_some_and(|old| old != g)
+        || gravity_turns(tilt.as_deref())
+        || state
+            .collisions
+            .is_some_and(|old| old != config.marble_collisions);
     state.gravity = Some(g);
+    state.collisions = Some(config.marble_collisions);
     // Boards that move, turn, or were moved since the last step: their swept bounds, and
     // where a moved board was (`None`: unbounded, it reaches everything). A board added,
     // removed or reshaped reaches everything.
@@ -346,7 +354,11 @@ pub fn fall_asleep(
     state.ready.clear();
     for (entity, (position, velocity, force, _, radius), contacts, spin, drowsy) in &mut marbles {
         fastest = fastest.max(velocity.0.length());
-        let spin_speed = spin.as_ref().map_or(0.0, |w| w.0.length() * radius.0);
+        // A spin counts only while rolling is on (off, it is frozen as it was).
+        let spin_speed = spin
+            .as_ref()
+            .filter(|_| config.rolling)
+            .map_or(0.0, |w| w.0.length() * radius.0);
         let on_moving_board = contacts.iter().any(|c| {
             cache
                 .boards

@@ -92,10 +92,7 @@ pub fn validate(
         ),
         (With<Board>, Without<Quarantined>),
     >,
-    incomplete: Query<
-        (Entity, Present),
-        (With<Marble>, Without<Quarantined>, Lacks),
-    >,
+    incomplete: Query<(Entity, Present), (With<Marble>, Without<Quarantined>, Lacks)>,
 ) {
     // A marble without a component the stages read (removed by the program: `Marble`
     // requires them all) would be stepped by none of them, or, asleep, never woken; it is

@@ -608,3 +608,37 @@ fn a_sleeping_marble_wakes_when_the_one_under_it_goes() {
         assert!((y - R).abs() <= 0.01 * R, "despawn {despawn}: at {y}");
     }
 }
+
+/// A sleeping column of two marbles: turning marble collisions off wakes it (the upper
+/// marble falls through the lower onto the floor, as it would awake), as turning off
+/// rolling with a spin left on a resting marble lets it fall asleep (the frozen spin no
+/// longer counts).
+#[test]
+fn sleep_follows_the_config_switches() {
+    let mut scene = resting_on_floor();
+    scene.marble_collisions = true;
+    scene.marbles.push(MarbleDesc::at([0.0, 3.0 * R, 0.0]));
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..40 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0) && asleep(&sim, 1), "the column sleeps");
+    sim.world_mut()
+        .resource_mut::<StepConfig>()
+        .marble_collisions = false;
+    for _ in 0..30 {
+        sim.step();
+    }
+    let y = sim.marble_state(1).0.y;
+    assert!((y - R).abs() <= 0.01 * R, "at {y}");
+
+    let mut scene = resting_on_floor();
+    scene.rolling = true;
+    scene.marbles[0].angular_velocity = [0.0, 50.0, 0.0]; // spinning in place
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    sim.world_mut().resource_mut::<StepConfig>().rolling = false;
+    for _ in 0..40 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0), "a frozen spin keeps it awake");
+}
