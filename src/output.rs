@@ -19,8 +19,15 @@ pub struct AtomicFile {
 }
 
 impl AtomicFile {
-    /// Starts writing `dest` (as `dest.partial` until committed).
+    /// Starts writing `dest` (as `dest.partial` until committed). A `dest` that is a
+    /// directory is refused at once (it could not be replaced at the commit).
     pub fn create(dest: &Path) -> io::Result<AtomicFile> {
+        if dest.is_dir() {
+            return Err(io::Error::new(
+                io::ErrorKind::IsADirectory,
+                "is a directory",
+            ));
+        }
         let mut name = dest.as_os_str().to_owned();
         name.push(".partial");
         let tmp = PathBuf::from(name);
@@ -37,11 +44,19 @@ impl AtomicFile {
         self.writer.as_mut().expect("not committed")
     }
 
-    /// Flushes and moves the file into place.
+    /// Flushes and moves the file into place; on failure the temporary file is removed
+    /// (nothing is left behind, as when dropped).
     pub fn commit(mut self) -> io::Result<()> {
         let w = self.writer.take().expect("not committed");
-        w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
-        std::fs::rename(&self.tmp, &self.dest)
+        let done = w
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .and_then(|f| f.sync_all())
+            .and_then(|()| std::fs::rename(&self.tmp, &self.dest));
+        if done.is_err() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+        done
     }
 }
 

@@ -541,3 +541,32 @@ fn restitution_bounds_are_exact_for_marbles_and_boards() {
         );
     }
 }
+
+/// An output path that is a directory fails at once (exit status 1, one line), before the
+/// run, and leaves nothing behind.
+#[test]
+fn cli_output_onto_a_directory_fails_at_once() {
+    let dir = temp_dir("dir_out");
+    std::fs::write(
+        dir.join("scene.ron"),
+        "(marbles: [(position: (0.0, 0.5, 0.0))])",
+    )
+    .unwrap();
+    std::fs::create_dir(dir.join("out")).unwrap();
+    for flag in ["--csv", "--plot", "--html"] {
+        let o = marble(&["run", "scene.ron", flag, "out", "--quiet"], &dir);
+        assert_eq!(o.status.code(), Some(1), "{flag}: {}", stderr(&o));
+        let err = stderr(&o);
+        assert_eq!(err.lines().count(), 1, "{flag}: {err}");
+        assert!(
+            err.starts_with("error: out: is a directory"),
+            "{flag}: {err}"
+        );
+    }
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["out", "scene.ron"]);
+}
