@@ -642,3 +642,42 @@ fn sleep_follows_the_config_switches() {
     }
     assert!(asleep(&sim, 0), "a frozen spin keeps it awake");
 }
+
+/// Two marbles asleep side by side on a floor, with contact events on: despawning one ends
+/// its contacts (with the other marble and with the floor) at the next step (the other
+/// wakes, so the pair is not carried on as a sleeping marble's).
+#[test]
+fn a_despawned_sleeping_marble_ends_its_contacts() {
+    use bevy_ecs::message::Messages;
+    let mut scene = resting_on_floor();
+    scene.marble_collisions = true;
+    scene.marbles.push(MarbleDesc::at([2.0 * R, R, 0.0]));
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    sim.world_mut().resource_mut::<StepConfig>().events = true;
+    for _ in 0..40 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0) && asleep(&sim, 1), "both asleep");
+    let (a, b) = (sim.marbles()[0], sim.marbles()[1]);
+    let floor = sim.boards()[0];
+    sim.world_mut().despawn(b);
+    sim.step();
+    let ended: Vec<ContactEnded> = sim
+        .world()
+        .resource::<Messages<ContactEnded>>()
+        .iter_current_update_messages()
+        .copied()
+        .collect();
+    let pair = ContactEnded {
+        marble: a.min(b),
+        other: a.max(b),
+    };
+    let on_floor = ContactEnded {
+        marble: b,
+        other: floor,
+    };
+    assert!(
+        ended.contains(&pair) && ended.contains(&on_floor) && ended.len() == 2,
+        "{ended:?}"
+    );
+}
