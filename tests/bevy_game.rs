@@ -254,36 +254,36 @@ fn impacts_come_at_the_free_fall_speed_and_shrink_by_e() {
     assert!(app.world().get::<Position>(marble).unwrap().y - r <= 1e-4);
 }
 
-/// Two marbles meeting head-on (no gravity, marble collisions on): one `MarbleImpact` for
-/// the pair at the closing speed 2u, its normal from the other marble towards the first,
-/// its point midway; the contact starts at the impact and ends once they have parted.
-#[test]
-fn a_marble_pair_impact_is_reported_once_at_its_closing_speed() {
+/// A recording app with no gravity and marble collisions on, and two elastic marbles
+/// 10 cm apart on the x axis closing head-on, each at `u`.
+fn head_on_pair(u: f32) -> (App, Entity, Entity) {
     let mut app = recording_app(DT);
     {
         let mut config = app.world_mut().resource_mut::<StepConfig>();
         config.gravity = Vec3::ZERO;
         config.marble_collisions = true;
     }
+    let mut spawn = |x: f32, v: f32| {
+        app.world_mut()
+            .spawn((
+                Marble,
+                Restitution(1.0),
+                Position(Vec3::X * x),
+                Velocity(Vec3::X * v),
+            ))
+            .id()
+    };
+    let (a, b) = (spawn(-0.05, u), spawn(0.05, -u));
+    (app, a, b)
+}
+
+/// Two marbles meeting head-on (no gravity, marble collisions on): one `MarbleImpact` for
+/// the pair at the closing speed 2u, its normal from the other marble towards the first,
+/// its point midway; the contact starts at the impact and ends once they have parted.
+#[test]
+fn a_marble_pair_impact_is_reported_once_at_its_closing_speed() {
     let u = 0.5;
-    let a = app
-        .world_mut()
-        .spawn((
-            Marble,
-            Restitution(1.0),
-            Position(Vec3::new(-0.05, 0.0, 0.0)),
-            Velocity(Vec3::X * u),
-        ))
-        .id();
-    let b = app
-        .world_mut()
-        .spawn((
-            Marble,
-            Restitution(1.0),
-            Position(Vec3::new(0.05, 0.0, 0.0)),
-            Velocity(-Vec3::X * u),
-        ))
-        .id();
+    let (mut app, a, b) = head_on_pair(u);
     for _ in 0..16 {
         app.update();
     }
@@ -632,29 +632,7 @@ fn the_plugin_group_leaves_parts_out() {
 /// pair is touching).
 #[test]
 fn turning_marble_collisions_off_ends_their_pairs() {
-    let mut app = recording_app(DT);
-    {
-        let mut config = app.world_mut().resource_mut::<StepConfig>();
-        config.gravity = Vec3::ZERO;
-        config.marble_collisions = true;
-    }
-    let u = 0.5;
-    let a = app
-        .world_mut()
-        .spawn((
-            Marble,
-            Position(Vec3::new(-0.05, 0.0, 0.0)),
-            Velocity(Vec3::X * u),
-        ))
-        .id();
-    let b = app
-        .world_mut()
-        .spawn((
-            Marble,
-            Position(Vec3::new(0.05, 0.0, 0.0)),
-            Velocity(-Vec3::X * u),
-        ))
-        .id();
+    let (mut app, a, b) = head_on_pair(0.5);
     let mut steps = 0;
     while app.world().resource::<Seen>().impacts.is_empty() {
         app.update();

@@ -578,6 +578,19 @@ fn deepest_with(sim: &Simulation, m: bevy_ecs::entity::Entity) -> f32 {
         / R
 }
 
+/// Two marbles stacked on a floor (marble collisions on), stepped until both sleep.
+fn sleeping_column() -> Simulation {
+    let mut scene = resting_on_floor();
+    scene.marble_collisions = true;
+    scene.marbles.push(MarbleDesc::at([0.0, 3.0 * R, 0.0]));
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..40 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0) && asleep(&sim, 1), "the column sleeps");
+    sim
+}
+
 /// A sleeping column of two marbles on a floor: the program despawns the lower one, or
 /// spoils its velocity (quarantined, it is out of every stage). The upper one wakes and
 /// falls the 2r onto the floor, as it would awake; asleep on a marble that is gone, it
@@ -585,14 +598,7 @@ fn deepest_with(sim: &Simulation, m: bevy_ecs::entity::Entity) -> f32 {
 #[test]
 fn a_sleeping_marble_wakes_when_the_one_under_it_goes() {
     for despawn in [true, false] {
-        let mut scene = resting_on_floor();
-        scene.marble_collisions = true;
-        scene.marbles.push(MarbleDesc::at([0.0, 3.0 * R, 0.0]));
-        let mut sim = Simulation::from_scene(&scene).unwrap();
-        for _ in 0..40 {
-            sim.step();
-        }
-        assert!(asleep(&sim, 0) && asleep(&sim, 1), "the column sleeps");
+        let mut sim = sleeping_column();
         let (lower, upper) = (sim.marbles()[0], sim.marbles()[1]);
         if despawn {
             sim.world_mut().despawn(lower);
@@ -615,14 +621,7 @@ fn a_sleeping_marble_wakes_when_the_one_under_it_goes() {
 /// longer counts).
 #[test]
 fn sleep_follows_the_config_switches() {
-    let mut scene = resting_on_floor();
-    scene.marble_collisions = true;
-    scene.marbles.push(MarbleDesc::at([0.0, 3.0 * R, 0.0]));
-    let mut sim = Simulation::from_scene(&scene).unwrap();
-    for _ in 0..40 {
-        sim.step();
-    }
-    assert!(asleep(&sim, 0) && asleep(&sim, 1), "the column sleeps");
+    let mut sim = sleeping_column();
     sim.world_mut()
         .resource_mut::<StepConfig>()
         .marble_collisions = false;
