@@ -154,7 +154,7 @@ pub fn sync_transforms(
             transform.rotation = rotation.0;
         }
     }
-    for (mut position, rotation, mut transform) in &mut boards {
+    for (mut position, mut rotation, mut transform) in &mut boards {
         if by_program(&transform) {
             teleport(&transform, &mut position, Some(rotation), false);
             continue;
