@@ -666,7 +666,10 @@ fn a_resting_pair_keeps_its_contact_when_a_marble_changes_table() {
         config.marble_collisions = true;
     }
     let r = 0.008;
-    let a = app.world_mut().spawn((Marble, Position(Vec3::ZERO))).id();
+    let a = app
+        .world_mut()
+        .spawn((Marble, Position(Vec3::ZERO)))
+        .id();
     let b = app
         .world_mut()
         .spawn((Marble, Position(Vec3::X * 2.0 * r)))
@@ -719,42 +722,4 @@ fn a_removed_sensor_is_left() {
             vec![(SensorExited { sensor, marble }, steps + 1)]
         );
     }
-}
-
-/// A game that puts a marble back at the start from an observer of the engine's events
-/// (a fall-out sensor under the board): the `Transform` set there is a teleport, as one
-/// set in `Update` is; the write-back at the step's end does not undo it.
-#[test]
-fn a_transform_set_by_an_observer_teleports() {
-    let mut app = recording_app(DT);
-    app.world_mut().spawn((
-        Sensor,
-        Collider::cuboid(Vec3::new(0.5, 0.05, 0.5)).unwrap(),
-        Transform::from_xyz(0.0, -0.5, 0.0),
-    ));
-    let start = Vec3::new(0.0, 1.0, 0.0);
-    app.world_mut().add_observer(
-        move |entered: On<SensorEntered>, mut transforms: Query<&mut Transform>| {
-            if let Ok(mut transform) = transforms.get_mut(entered.marble) {
-                transform.translation = start;
-            }
-        },
-    );
-    let marble = app
-        .world_mut()
-        .spawn((Marble, Transform::from_xyz(0.0, 0.0, 0.0)))
-        .id();
-    let mut steps = 0;
-    while app.world().resource::<Seen>().entered.is_empty() {
-        app.update();
-        steps += 1;
-        assert!(steps < 64, "never entered");
-    }
-    // Put back at the step's end, and falling from there.
-    let w = app.world();
-    assert_eq!(w.get::<Position>(marble).unwrap().0, start);
-    assert_eq!(w.get::<Transform>(marble).unwrap().translation, start);
-    app.update();
-    let y = app.world().get::<Position>(marble).unwrap().y;
-    assert!(y < 1.0 && y > 0.9, "{y}");
 }

@@ -8,7 +8,6 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
 use bevy_ecs::system::SystemChangeTick;
 use bevy_transform::components::Transform;
-use glam::Quat;
 
 use super::MarblePluginSystems;
 use super::interpolation::{PhysicsPoses, TransformInterpolation};
@@ -21,8 +20,7 @@ use crate::components::{Board, Marble, Position, Rotation, Sensor};
 ///   rotation); given both, `Position` and `Rotation` win. (This is the components' own
 ///   spawn hook, so it holds in a plain `World` too.)
 /// - A `Transform` the program changes after spawning moves its entity there before the
-///   next physics step (one changed during the step, by an observer of the engine's
-///   events, at the step's end): a **teleport**. The marble keeps its velocity and spin (set them
+///   next physics step: a **teleport**. The marble keeps its velocity and spin (set them
 ///   too for a fresh start); its contacts are found afresh at the new place in the next
 ///   substep, a sleeping marble wakes, and an interpolated entity jumps there without a
 ///   streak. A teleported board keeps its velocity; marbles it now overlaps are pushed
@@ -52,16 +50,13 @@ impl Plugin for MarbleTransformPlugin {
 #[derive(Resource, Default, Debug)]
 pub struct TransformWrites {
     pub(super) tick: Tick,
-    /// The tick of the last [`read_transforms`]: a `Transform` changed after it and before
-    /// the write-back was changed during the step (an observer of the engine's events).
-    read: Tick,
 }
 
 /// Moves every marble, board and sensor whose `Transform` the program changed since the
 /// engine last wrote it to that `Transform` (see [`MarbleTransformPlugin`]).
 #[allow(clippy::type_complexity)]
 pub fn read_transforms(
-    mut writes: ResMut<TransformWrites>,
+    writes: Res<TransformWrites>,
     ticks: SystemChangeTick,
     mut entities: Query<
         (
@@ -89,41 +84,31 @@ pub fn read_transforms(
         if transform.is_added() || !by_program {
             continue;
         }
-        let r = teleport(&transform, &mut position, rotation, marble);
+        position.0 = transform.translation;
+        let mut r = None;
+        if let Some(mut rotation) = rotation {
+            // A marble's orientation is only its spin's bookkeeping; a board's and a
+            // sensor's is their pose.
+            if !marble || rotation.0 != transform.rotation {
+                rotation.0 = transform.rotation;
+            }
+            r = Some(rotation.0);
+        }
         if let Some(mut poses) = poses {
             poses.reset(position.0, r.unwrap_or(transform.rotation));
         }
     }
-    writes.read = ticks.this_run();
-}
-
-/// Moves an entity to the `Transform` the program gave it: its position, and the rotation
-/// it carries (returned). A marble's orientation is only its spin's bookkeeping; a
-/// board's and a sensor's is their pose.
-fn teleport(
-    transform: &Transform,
-    position: &mut Position,
-    rotation: Option<Mut<Rotation>>,
-    marble: bool,
-) -> Option<Quat> {
-    position.0 = transform.translation;
-    let mut rotation = rotation?;
-    if !marble || rotation.0 != transform.rotation {
-        rotation.0 = transform.rotation;
-    }
-    Some(rotation.0)
 }
 
 /// Writes marble positions (and orientations, for marbles that carry a `Rotation`) and
 /// board poses into their `Transform`s; entities with [`TransformInterpolation`] are left
-/// to the interpolation. A `Transform` the program changed during the step (an observer
-/// of the engine's events) is a teleport, made here instead of being overwritten.
+/// to the interpolation.
 #[allow(clippy::type_complexity)]
 pub fn sync_transforms(
     mut writes: ResMut<TransformWrites>,
     ticks: SystemChangeTick,
     mut marbles: Query<
-        (&mut Position, Option<&mut Rotation>, &mut Transform),
+        (&Position, Option<&Rotation>, &mut Transform),
         (
             With<Marble>,
             Without<Board>,
@@ -131,7 +116,7 @@ pub fn sync_transforms(
         ),
     >,
     mut boards: Query<
-        (&mut Position, &mut Rotation, &mut Transform),
+        (&Position, &Rotation, &mut Transform),
         (
             With<Board>,
             Without<Marble>,
@@ -139,28 +124,15 @@ pub fn sync_transforms(
         ),
     >,
 ) {
-    let now = ticks.this_run();
-    // Changed since the transforms were read, and not just spawned (the spawn hook read
-    // it, or `Position` won).
-    let by_program =
-        |t: &Mut<Transform>| !t.is_added() && t.last_changed().is_newer_than(writes.read, now);
-    for (mut position, rotation, mut transform) in &mut marbles {
-        if by_program(&transform) {
-            teleport(&transform, &mut position, rotation, true);
-            continue;
-        }
+    for (position, rotation, mut transform) in &mut marbles {
         transform.translation = position.0;
         if let Some(rotation) = rotation {
             transform.rotation = rotation.0;
         }
     }
-    for (mut position, mut rotation, mut transform) in &mut boards {
-        if by_program(&transform) {
-            teleport(&transform, &mut position, Some(rotation), false);
-            continue;
-        }
+    for (position, rotation, mut transform) in &mut boards {
         transform.translation = position.0;
         transform.rotation = rotation.0;
     }
-    writes.tick = now;
+    writes.tick = ticks.this_run();
 }
