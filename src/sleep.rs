@@ -115,10 +115,10 @@ pub struct SleepState {
     /// distance they move on over the rest of the step; and of those, the boards that move.
     pub(crate) reaching: Vec<(Option<Aabb>, f32)>,
     pub(crate) moving: Vec<(Option<Aabb>, f32)>,
-    /// Gravity as the marbles saw it at the last step, and whether marble collisions
-    /// were on.
+    /// Gravity as the marbles saw it at the last step, and whether marble collisions and
+    /// rolling were on.
     pub(crate) gravity: Option<Vec3>,
-    pub(crate) collisions: Option<bool>,
+    pub(crate) switches: Option<(bool, bool)>,
     /// The board cache's epoch at the last step.
     pub(crate) epoch: u32,
     /// Each board's entity, pose version and swept bounds at the last step.

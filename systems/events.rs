@@ -128,7 +128,7 @@ pub fn finish_touches(
     mut state: ResMut<EventState>,
     mut started: ResMut<Messages<ContactStarted>>,
     mut ended: ResMut<Messages<ContactEnded>>,
-    asleep: Query<(), (With<Marble>, With<Sleeping>)>,
+    asleep: Query<(), (With<Marble>, With<Sleeping>, Without<Quarantined>)>,
 ) {
     let state = state.as_mut();
     // A step that touched what the last one did, in the same order (a pile at rest), has

@@ -153,7 +153,7 @@ pub fn wake(
     if config.sleep.is_none() {
         state.removed.clear();
         state.gravity = None;
-        state.collisions = None;
+        state.switches = None;
         state.poses.clear();
         state.keys.clear();
         for (entity, .., drowsy) in &mut sleepers {
@@ -168,16 +168,17 @@ pub fn wake(
         return;
     }
     let g = seen_gravity(&config, tilt.as_deref());
-    // Gravity changed, or marble collisions turned on or off (a sleeping pile then falls
-    // through itself, or marbles asleep inside each other are pushed apart): every
-    // sleeping marble wakes.
+    // Gravity changed, or marble collisions or rolling turned on or off (a sleeping pile
+    // then falls through itself, marbles asleep inside each other are pushed apart, a
+    // spin kept while rolling was off turns): every sleeping marble wakes.
+    let switches = (config.marble_collisions, config.rolling);
     let gravity_changed = state.gravity.is_some_and(|old| old != g)
         || gravity_turns(tilt.as_deref())
-        || state
-            .collisions
-            .is_some_and(|old| old != config.marble_collisions);
+        || state.switches.is_some_and(|old| old != switches);
     state.gravity = Some(g);
-    state.collisions = Some(config.marble_collisions);
+    state.switches = Some(switches);
+    // A spin counts only while rolling is on (off, it is kept as it was, inert).
+    let rolling = config.rolling;
     // Boards that move, turn, or were moved since the last step: their swept bounds, and
     // where a moved board was (`None`: unbounded, it reaches everything). A board added,
     // removed or reshaped reaches everything.
@@ -234,9 +235,9 @@ pub fn wake(
         || !state.reaching.is_empty()
         || (config.marble_collisions && !awake.is_empty());
     if !reached
-        && !changed
-            .iter()
-            .any(|(sleeping, state, spin)| changed_by_program(sleeping, state, spin))
+        && !changed.iter().any(|(sleeping, state, spin)| {
+            changed_by_program(sleeping, state, spin.filter(|_| rolling))
+        })
     {
         // Nothing reached a sleeper (so no board moves and gravity holds); with no marble
         // awake either, the step has nothing left to do.
@@ -255,7 +256,7 @@ pub fn wake(
         state.spheres.push(position.0.extend(radius.0));
         state.entities.push(entity);
         let wakes = gravity_changed
-            || changed_by_program(sleeping, marble, spin)
+            || changed_by_program(sleeping, marble, spin.filter(|_| rolling))
             || reached_by_board(&state.reaching, position.0, radius.0);
         state.woken.push(wakes);
         if wakes {
@@ -443,7 +444,7 @@ pub fn fall_asleep(
         }
         state.keys.push(entity.to_bits());
         velocity.0 = Vec3::ZERO;
-        if let Some(mut spin) = spin {
+        if let Some(mut spin) = spin.filter(|_| config.rolling) {
             spin.0 = Vec3::ZERO;
         }
         commands.entity(entity).insert(Sleeping {

@@ -85,7 +85,11 @@ fn quarantined_where_it_is(
         w.get::<Quarantined>(bad).is_some(),
         "{component}: not quarantined"
     );
-    assert_eq!(motion(w), before, "{component}: its velocity or force changed");
+    assert_eq!(
+        motion(w),
+        before,
+        "{component}: its velocity or force changed"
+    );
     assert_eq!(
         w.get::<Position>(bad).unwrap().0,
         at,

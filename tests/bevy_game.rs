@@ -666,10 +666,7 @@ fn a_resting_pair_keeps_its_contact_when_a_marble_changes_table() {
         config.marble_collisions = true;
     }
     let r = 0.008;
-    let a = app
-        .world_mut()
-        .spawn((Marble, Position(Vec3::ZERO)))
-        .id();
+    let a = app.world_mut().spawn((Marble, Position(Vec3::ZERO))).id();
     let b = app
         .world_mut()
         .spawn((Marble, Position(Vec3::X * 2.0 * r)))

@@ -578,12 +578,14 @@ fn deepest_with(sim: &Simulation, m: bevy_ecs::entity::Entity) -> f32 {
         / R
 }
 
-/// Two marbles stacked on a floor (marble collisions on), stepped until both sleep.
-fn sleeping_column() -> Simulation {
+/// Two marbles stacked on a floor (marble collisions on, contact events as `events`),
+/// stepped until both sleep.
+fn sleeping_column(events: bool) -> Simulation {
     let mut scene = resting_on_floor();
     scene.marble_collisions = true;
     scene.marbles.push(MarbleDesc::at([0.0, 3.0 * R, 0.0]));
     let mut sim = Simulation::from_scene(&scene).unwrap();
+    sim.world_mut().resource_mut::<StepConfig>().events = events;
     for _ in 0..40 {
         sim.step();
     }
@@ -598,7 +600,7 @@ fn sleeping_column() -> Simulation {
 #[test]
 fn a_sleeping_marble_wakes_when_the_one_under_it_goes() {
     for despawn in [true, false] {
-        let mut sim = sleeping_column();
+        let mut sim = sleeping_column(true);
         let (lower, upper) = (sim.marbles()[0], sim.marbles()[1]);
         if despawn {
             sim.world_mut().despawn(lower);
@@ -607,21 +609,32 @@ fn a_sleeping_marble_wakes_when_the_one_under_it_goes() {
                 .entity_mut(lower)
                 .insert(Velocity(Vec3::splat(f32::NAN)));
         }
+        let mut ended = Vec::new();
         for _ in 0..30 {
             sim.step();
+            let messages = sim
+                .world()
+                .resource::<bevy_ecs::message::Messages<ContactEnded>>();
+            ended.extend(messages.iter_current_update_messages().copied());
         }
         let y = sim.world().get::<Position>(upper).unwrap().y;
         assert!((y - R).abs() <= 0.01 * R, "despawn {despawn}: at {y}");
+        // The pair's contact ended too (the quarantined marble is as if not there).
+        let pair = ContactEnded {
+            marble: lower.min(upper),
+            other: lower.max(upper),
+        };
+        assert!(ended.contains(&pair), "despawn {despawn}: {ended:?}");
     }
 }
 
 /// A sleeping column of two marbles: turning marble collisions off wakes it (the upper
 /// marble falls through the lower onto the floor, as it would awake), as turning off
 /// rolling with a spin left on a resting marble lets it fall asleep (the frozen spin no
-/// longer counts).
+/// longer counts, and is kept), and turning rolling on again wakes it.
 #[test]
 fn sleep_follows_the_config_switches() {
-    let mut sim = sleeping_column();
+    let mut sim = sleeping_column(false);
     sim.world_mut()
         .resource_mut::<StepConfig>()
         .marble_collisions = false;
@@ -640,6 +653,13 @@ fn sleep_follows_the_config_switches() {
         sim.step();
     }
     assert!(asleep(&sim, 0), "a frozen spin keeps it awake");
+    // Asleep, it keeps its spin, inert while rolling is off; rolling on again wakes it.
+    let m = sim.marbles()[0];
+    let spin = |sim: &Simulation| sim.world().get::<AngularVelocity>(m).unwrap().0;
+    assert_eq!(spin(&sim), Vec3::new(0.0, 50.0, 0.0));
+    sim.world_mut().resource_mut::<StepConfig>().rolling = true;
+    sim.step();
+    assert!(!asleep(&sim, 0), "rolling on again: still asleep");
 }
 
 /// Two marbles asleep side by side on a floor, with contact events on: despawning one ends
