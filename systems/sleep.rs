@@ -172,7 +172,7 @@ pub fn wake(
     // then falls through itself, marbles asleep inside each other are pushed apart, a
     // spin kept while rolling was off turns): every sleeping marble wakes.
     let switches = (config.marble_collisions, config.rolling);
-    let gravity_changed = state.gravity.is_some_and(|old| old != g)
+    let wake_all = state.gravity.is_some_and(|old| old != g)
         || gravity_turns(tilt.as_deref())
         || state.switches.is_some_and(|old| old != switches);
     state.gravity = Some(g);
@@ -191,13 +191,12 @@ pub fn wake(
     }
     // Sleeping marbles gone since the last step (despawned, or quarantined: out of every
     // stage, as if not there) reach the marbles that rested on them.
-    for sleeping in &quarantined {
-        state
-            .removed
-            .push(sleeping.position.extend(sleeping.radius));
-    }
-    for gone in state.removed.drain(..) {
-        let (c, r) = (gone.truncate(), Vec3::splat(gone.w));
+    let gone = quarantined
+        .iter()
+        .map(|s| s.position.extend(s.radius))
+        .chain(state.removed.drain(..));
+    for sphere in gone {
+        let (c, r) = (sphere.truncate(), Vec3::splat(sphere.w));
         state.reaching.push((Some(Aabb::new(c - r, c + r)), 0.0));
     }
     for b in &cache.boards {
@@ -231,9 +230,8 @@ pub fn wake(
     // The stages never write to a sleeping marble, so only one the program changed since
     // the last step can have woken by itself; with no board, no gravity and no awake
     // marble to reach the others, a still world stops here.
-    let reached = gravity_changed
-        || !state.reaching.is_empty()
-        || (config.marble_collisions && !awake.is_empty());
+    let reached =
+        wake_all || !state.reaching.is_empty() || (config.marble_collisions && !awake.is_empty());
     if !reached
         && !changed.iter().any(|(sleeping, state, spin)| {
             changed_by_program(sleeping, state, spin.filter(|_| rolling))
@@ -255,7 +253,7 @@ pub fn wake(
         let k = state.spheres.len() as u32;
         state.spheres.push(position.0.extend(radius.0));
         state.entities.push(entity);
-        let wakes = gravity_changed
+        let wakes = wake_all
             || changed_by_program(sleeping, marble, spin.filter(|_| rolling))
             || reached_by_board(&state.reaching, position.0, radius.0);
         state.woken.push(wakes);
