@@ -156,6 +156,10 @@ pub struct Board;
 /// A point is inside a cuboid, a bowl's sphere below its rim, a half-space (below its
 /// plane), a height field (below its surface) or a closed triangle mesh (enclosed by it);
 /// a compound sensor is the union of its parts.
+///
+/// Given to a [`Board`], it makes the board a sensor: marbles pass through it from the next
+/// step on (those resting on it fall), while it moves as before; removed, the board holds
+/// marbles again.
 #[derive(Component, Clone, Copy, Debug, Default)]
 #[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
 #[component(on_add = resolve_unset_pose)]
@@ -220,28 +224,38 @@ impl Rotation {
 }
 
 /// Hook of [`Marble`], [`Board`] and [`Sensor`]: a pose left unset takes the entity's
-/// `Transform` (with the `bevy` feature) or the origin and no rotation.
+/// `Transform` (with the `bevy` feature) or the origin and no rotation. Without a
+/// `Transform` yet, in an app with the plugin, one inserted before the next step places
+/// the entity then (`MarbleTransformPlugin`).
 fn resolve_unset_pose(
     mut world: bevy_ecs::world::DeferredWorld,
     context: bevy_ecs::lifecycle::HookContext,
 ) {
     let entity = context.entity;
+    let position_unset = world
+        .get::<Position>(entity)
+        .is_some_and(Position::is_unset);
+    let rotation_unset = world
+        .get::<Rotation>(entity)
+        .is_some_and(Rotation::is_unset);
+    if !position_unset && !rotation_unset {
+        return;
+    }
     #[cfg(feature = "bevy")]
-    let (translation, rotation) = world
-        .get::<bevy_transform::components::Transform>(entity)
-        .map_or((Vec3::ZERO, Quat::IDENTITY), |t| {
-            (t.translation, t.rotation)
-        });
+    let (translation, rotation) = match world.get::<bevy_transform::components::Transform>(entity) {
+        Some(t) => (t.translation, t.rotation),
+        None => {
+            // A `Transform` inserted later, before the next step, places it then.
+            crate::plugin::note_unplaced(&mut world, entity, position_unset, rotation_unset);
+            (Vec3::ZERO, Quat::IDENTITY)
+        }
+    };
     #[cfg(not(feature = "bevy"))]
     let (translation, rotation) = (Vec3::ZERO, Quat::IDENTITY);
-    if let Some(mut position) = world.get_mut::<Position>(entity)
-        && position.is_unset()
-    {
+    if position_unset && let Some(mut position) = world.get_mut::<Position>(entity) {
         position.0 = translation;
     }
-    if let Some(mut r) = world.get_mut::<Rotation>(entity)
-        && r.is_unset()
-    {
+    if rotation_unset && let Some(mut r) = world.get_mut::<Rotation>(entity) {
         r.0 = rotation;
     }
 }

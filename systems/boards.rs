@@ -7,13 +7,14 @@ use parry3d::bounding_volume::Aabb;
 use crate::board_contact::{BoardCache, BoardSnapshot};
 use crate::components::{
     AngularVelocity, Board, Collider, Friction, NextPose, Position, PositionCarry, Quarantined,
-    Restitution, RollingResistance, Rotation, SpinDamping, Velocity, compensated_add,
+    Restitution, RollingResistance, Rotation, Sensor, SpinDamping, Velocity, compensated_add,
 };
 use crate::config::{StepConfig, Substep};
 use crate::geometry::transform_aabb;
 
 /// Snapshots every board (pose, motion, bounds swept over the substep) into
-/// [`BoardCache`], reusing its storage.
+/// [`BoardCache`], reusing its storage. A board that is also a [`Sensor`] is a volume
+/// marbles pass through: it is left out.
 pub fn prepare_boards(
     substep: Res<Substep>,
     mut cache: ResMut<BoardCache>,
@@ -30,7 +31,7 @@ pub fn prepare_boards(
             Option<&RollingResistance>,
             Option<&SpinDamping>,
         ),
-        (With<Board>, Without<Quarantined>),
+        (With<Board>, Without<Sensor>, Without<Quarantined>),
     >,
 ) {
     let h = substep.h;

@@ -720,3 +720,163 @@ fn a_removed_sensor_is_left() {
         );
     }
 }
+
+/// A `Transform` (or `Position`) given by a later command than the one that spawned the
+/// marble or board: the entity starts there, as if spawned with it. A `Position` given
+/// still wins.
+#[test]
+fn a_transform_inserted_after_the_spawn_places_the_entity() {
+    let mut app = app(DT);
+    let world = app.world_mut();
+    let marble = world.spawn(Marble).id();
+    world
+        .entity_mut(marble)
+        .insert(Transform::from_xyz(0.0, 0.5, 0.0));
+    let turn = Quat::from_rotation_z(0.3);
+    let board = world
+        .spawn((Board, Collider::cuboid(Vec3::new(1.0, 0.1, 1.0)).unwrap()))
+        .id();
+    world
+        .entity_mut(board)
+        .insert(Transform::from_xyz(3.0, 0.0, 0.0).with_rotation(turn));
+    let given = world.spawn(Marble).id();
+    world
+        .entity_mut(given)
+        .insert(Position(Vec3::new(0.0, 2.0, 0.0)));
+    world
+        .entity_mut(given)
+        .insert(Transform::from_xyz(0.0, 9.0, 0.0));
+    // Through commands, as a game's systems spawn.
+    let mut commands = world.commands();
+    let id = commands.spawn(Marble).id();
+    commands
+        .entity(id)
+        .insert((Transform::from_xyz(1.0, 0.5, 0.0), Radius(0.02)));
+    world.flush();
+    app.update();
+    let fall = 0.5 * G * (DT * DT) as f32;
+    let w = app.world_mut();
+    let y = w.get::<Position>(marble).unwrap().0;
+    assert!(
+        (y - Vec3::new(0.0, 0.5 - fall, 0.0)).length() <= 1e-6,
+        "{y}"
+    );
+    assert_eq!(
+        w.get::<Position>(board).unwrap().0,
+        Vec3::new(3.0, 0.0, 0.0)
+    );
+    assert_eq!(w.get::<Rotation>(board).unwrap().0, turn);
+    let y2 = w.get::<Position>(given).unwrap().0;
+    assert!(
+        (y2 - Vec3::new(0.0, 2.0 - fall, 0.0)).length() <= 1e-6,
+        "{y2}"
+    );
+    let p = w.get::<Position>(id).unwrap().0;
+    assert!(
+        (p - Vec3::new(1.0, 0.5 - fall, 0.0)).length() <= 1e-6,
+        "{p}"
+    );
+}
+
+/// A board given `Sensor` stops holding marbles: the marble resting on it falls through
+/// from the next step on, its contact ending, and enters it as a sensor.
+#[test]
+fn a_board_made_a_sensor_lets_marbles_through() {
+    let mut app = recording_app(DT);
+    let slab = app
+        .world_mut()
+        .spawn((
+            Board,
+            Collider::cuboid(Vec3::new(1.0, 0.1, 1.0)).unwrap(),
+            Transform::from_xyz(0.0, -0.1, 0.0),
+        ))
+        .id();
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Transform::from_xyz(0.0, 0.1, 0.0)))
+        .id();
+    for _ in 0..64 {
+        app.update();
+    }
+    let r = app.world().get::<Radius>(marble).unwrap().0;
+    let y = app.world().get::<Position>(marble).unwrap().y;
+    assert!((y - r).abs() <= 1e-4, "resting at {y}");
+    let seen = app.world().resource::<Seen>();
+    let (steps, started, ended) = (seen.steps, seen.started.len(), seen.ended.len());
+    assert_eq!(started, ended + 1, "resting on it");
+    app.world_mut().entity_mut(slab).insert(Sensor);
+    app.update();
+    // Free fall from rest at y = r: after one step, ½ g dt² lower; its centre passes the
+    // slab's top, y = 0, after √(2r/g).
+    let y = app.world().get::<Position>(marble).unwrap().y;
+    let want = r - 0.5 * G * (DT * DT) as f32;
+    assert!((y - want).abs() <= 1e-6, "y = {y}, want {want}");
+    for _ in 0..4 {
+        app.update();
+    }
+    let inside = ((2.0 * r / G).sqrt() as f64 / DT).ceil() as u32;
+    let seen = app.world().resource::<Seen>();
+    assert_eq!(
+        seen.entered,
+        vec![(
+            SensorEntered {
+                sensor: slab,
+                marble
+            },
+            steps + inside
+        )]
+    );
+    assert_eq!(seen.started.len(), started);
+    assert_eq!(
+        seen.ended[ended..],
+        [ContactEnded {
+            marble,
+            other: slab
+        }]
+    );
+}
+
+/// Two teleports by the game's own fixed-step system within one frame of several fixed
+/// steps, on an interpolated marble: both are taken, the marble ends where the second
+/// put it.
+#[test]
+fn an_interpolated_marble_takes_every_teleport_of_a_frame() {
+    let mut app = app(4.0 * DT);
+    app.world_mut().resource_mut::<StepConfig>().gravity = Vec3::ZERO;
+    let marble = app
+        .world_mut()
+        .spawn((
+            Marble,
+            TransformInterpolation,
+            Transform::from_xyz(0.0, 1.0, 0.0),
+        ))
+        .id();
+    #[derive(Resource, Default)]
+    struct Count(u32);
+    app.init_resource::<Count>();
+    app.add_systems(
+        FixedUpdate,
+        move |mut count: ResMut<Count>, mut q: Query<&mut Transform>| {
+            count.0 += 1;
+            let to = match count.0 {
+                9 => Vec3::new(5.0, 1.0, 0.0),
+                11 => Vec3::new(-7.0, 2.0, 0.0),
+                _ => return,
+            };
+            q.get_mut(marble).unwrap().translation = to;
+        },
+    );
+    for _ in 0..4 {
+        app.update();
+    }
+    assert_eq!(app.world().resource::<Count>().0, 16);
+    let w = app.world();
+    assert_eq!(
+        w.get::<Position>(marble).unwrap().0,
+        Vec3::new(-7.0, 2.0, 0.0)
+    );
+    assert_eq!(
+        w.get::<Transform>(marble).unwrap().translation,
+        Vec3::new(-7.0, 2.0, 0.0)
+    );
+}

@@ -34,7 +34,8 @@ pub struct PhysicsPoses {
     pub current: (Vec3, Quat),
     /// Set once the poses hold the entity's pose.
     initialised: bool,
-    /// The `Transform` the easing wrote last: one that differs was set by the program.
+    /// The `Transform` the easing wrote or the step took last: one that differs was set
+    /// by the program.
     pub(super) written: Option<(Vec3, Quat)>,
 }
 
@@ -44,7 +45,12 @@ impl PhysicsPoses {
         self.previous = (position, rotation);
         self.current = (position, rotation);
         self.initialised = true;
-        self.written = None;
+    }
+
+    /// `transform` is taken (the pose it gave was read, or it is where the entity
+    /// starts): only a `Transform` the program sets after this counts as set by it.
+    pub(super) fn saw(&mut self, transform: &Transform) {
+        self.written = Some((transform.translation, transform.rotation));
     }
 
     /// Whether `transform` differs from what the easing last wrote: the program set it.
@@ -97,12 +103,15 @@ fn pose(position: &Position, rotation: Option<&Rotation>) -> (Vec3, Quat) {
 /// left it was moved by the program: it jumps (no easing from the old place).
 pub fn catch_teleports(
     mut entities: Query<
-        (&Position, Option<&Rotation>, &mut PhysicsPoses),
+        (&Position, Option<&Rotation>, &mut PhysicsPoses, &Transform),
         With<TransformInterpolation>,
     >,
 ) {
-    for (position, rotation, mut poses) in &mut entities {
+    for (position, rotation, mut poses, transform) in &mut entities {
         let now = pose(position, rotation);
+        if !poses.initialised {
+            poses.saw(transform);
+        }
         if !poses.initialised || now != poses.current {
             poses.reset(now.0, now.1);
         }

@@ -31,6 +31,7 @@ mod transform;
 pub use diagnostics::{MarbleDiagnostics, MarbleDiagnosticsPlugin};
 pub use interpolation::{MarbleInterpolationPlugin, PhysicsPoses, TransformInterpolation};
 pub use transform::MarbleTransformPlugin;
+pub(crate) use transform::note_unplaced;
 
 /// Runs the marble physics in a Bevy app: every plugin of [`MarblePhysicsPlugins`].
 ///

@@ -8,6 +8,7 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
 use bevy_ecs::system::SystemChangeTick;
 use bevy_transform::components::Transform;
+use glam::{Quat, Vec3};
 
 use super::MarblePluginSystems;
 use super::interpolation::{PhysicsPoses, TransformInterpolation};
@@ -19,6 +20,8 @@ use crate::components::{Board, Marble, Position, Rotation, Sensor};
 ///   `Position` starts at the `Transform`'s translation (a board or sensor also at its
 ///   rotation); given both, `Position` and `Rotation` win. (This is the components' own
 ///   spawn hook, so it holds in a plain `World` too.)
+/// - An entity spawned with neither (at the origin) that is given a `Transform` by a later
+///   command, before the next step, starts there too (a pose given by then wins).
 /// - A `Transform` the program changes after spawning moves its entity there before the
 ///   next physics step: a **teleport**. The marble keeps its velocity and spin (set them
 ///   too for a fresh start); its contacts are found afresh at the new place in the next
@@ -35,6 +38,7 @@ pub struct MarbleTransformPlugin {
 impl Plugin for MarbleTransformPlugin {
     fn build(&self, app: &mut App) {
         app.init_resource::<TransformWrites>();
+        app.init_resource::<Unplaced>();
         app.add_systems(
             self.schedule,
             (
@@ -52,12 +56,35 @@ pub struct TransformWrites {
     pub(super) tick: Tick,
 }
 
-/// Moves every marble, board and sensor whose `Transform` the program changed since the
-/// engine last wrote it to that `Transform` (see [`MarbleTransformPlugin`]).
+/// Marbles, boards and sensors spawned with neither a pose nor a `Transform`, since the
+/// last step (a resource): each with whether its position and its rotation were unset,
+/// so that a `Transform` inserted by a later command places it as if it had been spawned
+/// with it.
+#[derive(Resource, Default, Debug)]
+pub struct Unplaced(Vec<(Entity, bool, bool)>);
+
+/// Notes an entity the spawn hook placed at the origin for want of a `Transform`, in an
+/// app with [`MarbleTransformPlugin`] (elsewhere nothing would take it up).
+pub(crate) fn note_unplaced(
+    world: &mut bevy_ecs::world::DeferredWorld,
+    entity: Entity,
+    position: bool,
+    rotation: bool,
+) {
+    if let Some(mut unplaced) = world.get_resource_mut::<Unplaced>() {
+        unplaced.0.push((entity, position, rotation));
+    }
+}
+
+/// Places every entity of [`Unplaced`] given a `Transform` since it was spawned, where its
+/// pose is still the origin the spawn hook gave it; then moves every marble, board and
+/// sensor whose `Transform` the program changed since the engine last wrote it to that
+/// `Transform` (see [`MarbleTransformPlugin`]).
 #[allow(clippy::type_complexity)]
 pub fn read_transforms(
     writes: Res<TransformWrites>,
     ticks: SystemChangeTick,
+    mut unplaced: ResMut<Unplaced>,
     mut entities: Query<
         (
             Ref<Transform>,
@@ -72,6 +99,26 @@ pub fn read_transforms(
         ),
     >,
 ) {
+    for (entity, position_unset, rotation_unset) in unplaced.0.drain(..) {
+        // Changed: its `Transform` was added since the last step (or it has none).
+        let Ok((transform, mut position, rotation, _, poses)) = entities.get_mut(entity) else {
+            continue;
+        };
+        if position_unset && position.0 == Vec3::ZERO {
+            position.0 = transform.translation;
+        }
+        let mut r = None;
+        if let Some(mut rotation) = rotation {
+            if rotation_unset && rotation.0 == Quat::IDENTITY {
+                rotation.0 = transform.rotation;
+            }
+            r = Some(rotation.0);
+        }
+        if let Some(mut poses) = poses {
+            poses.reset(position.0, r.unwrap_or(transform.rotation));
+            poses.saw(&transform);
+        }
+    }
     for (transform, mut position, rotation, marble, poses) in &mut entities {
         // Spawned with it (the spawn hook read it), or written by the engine: by the
         // easing for an interpolated entity, else by the last step's write-back.
@@ -96,6 +143,7 @@ pub fn read_transforms(
         }
         if let Some(mut poses) = poses {
             poses.reset(position.0, r.unwrap_or(transform.rotation));
+            poses.saw(&transform);
         }
     }
 }
