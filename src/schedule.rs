@@ -64,9 +64,10 @@ pub enum MarbleSystems {
     Report,
 }
 
-/// The stages that run only in a step's last substep: a step of a still world (every
-/// marble asleep, nothing moving: see [`run_step`]) runs only its first substep, so they
-/// do not run in it (they would find no awake marble).
+/// The stages that run only in the substep that ends a step: its last, or, in a step of a
+/// still world (every marble asleep, nothing moving: see [`run_step`]), its first and
+/// only one (they find no awake marble then, but sensors added, moved or removed are
+/// still reported).
 pub const LAST_SUBSTEP_STAGES: [MarbleSystems; 3] = [
     MarbleSystems::FallAsleep,
     MarbleSystems::Finish,
@@ -105,7 +106,7 @@ pub fn substep_schedule() -> Schedule {
             .chain(),
     );
     for stage in LAST_SUBSTEP_STAGES {
-        schedule.configure_sets(stage.run_if(forces::last_substep));
+        schedule.configure_sets(stage.run_if(forces::step_ends));
     }
     let rolling = |c: Res<StepConfig>| c.rolling;
     let collisions = |c: Res<StepConfig>| c.marble_collisions;
@@ -203,9 +204,8 @@ pub fn init_resources(world: &mut World) {
 /// the first when its [`crate::systems::sleep::wake`] found a still world (every marble asleep,
 /// none woken, no board moving, gravity not turning: [`SleepState::is_idle`]), whose
 /// other substeps would do nothing. Systems added to [`MarbleSubstep`] then run once in
-/// that step, and those of the last substep ([`LAST_SUBSTEP_STAGES`], or run if
-/// [`Substep::is_last`]) not at all. It sets the [`Substep`] resource before each
-/// substep.
+/// that step; the [`LAST_SUBSTEP_STAGES`] run in it too, while systems run if
+/// [`Substep::is_last`] do not. It sets the [`Substep`] resource before each substep.
 ///
 /// A [`StepConfig`] with a bad value ([`StepConfig::validate`]) runs no substep: the step
 /// is refused, a [`StepRefused`] message names the field and value (and a log error, when

@@ -42,7 +42,9 @@
 //!
 //! A step whose [`wake`] finds a still world (every marble asleep, none woken, no board
 //! moving, gravity not turning: [`SleepState::is_idle`]) runs only its first substep
-//! ([`crate::schedule::run_step`]): the others would find nothing to do.
+//! ([`crate::schedule::run_step`]): the others would find nothing to do. The stages that
+//! end a step run in it all the same, so sensors added, moved or removed around sleeping
+//! marbles are reported at once.
 //!
 //! What sleeping costs in accuracy: a marble slower than the threshold for [`Sleep::time`]
 //! (a very slow roll on a level board, the last settling of a pile) stops where it is; one

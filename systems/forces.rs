@@ -41,6 +41,12 @@ pub fn last_substep(substep: Res<Substep>) -> bool {
     substep.is_last()
 }
 
+/// Run condition: true during the substep that ends the step: the last, or the only one a
+/// still world runs ([`SleepState::is_idle`](crate::sleep::SleepState::is_idle)).
+pub fn step_ends(substep: Res<Substep>, sleep: Res<crate::sleep::SleepState>) -> bool {
+    substep.is_last() || sleep.is_idle()
+}
+
 /// Clears every stepped marble's [`Force`] once the whole step has integrated it (a
 /// quarantined marble's is left as it is, with the rest of its state).
 pub fn clear_forces(

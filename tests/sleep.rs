@@ -700,3 +700,46 @@ fn a_despawned_sleeping_marble_ends_its_contacts() {
         "{ended:?}"
     );
 }
+
+/// A still world (every marble asleep) still reports its sensors each step, however many
+/// substeps a step has: a sensor spawned around a sleeping marble is entered at the next
+/// step, and left at the step after it is despawned, the marble asleep all along.
+#[test]
+fn a_sleeping_marble_enters_and_leaves_sensors() {
+    use bevy_ecs::message::Messages;
+    let mut scene = resting_on_floor();
+    scene.substeps = 4;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..33 {
+        sim.step();
+    }
+    assert!(asleep(&sim, 0));
+    let marble = sim.marbles()[0];
+    let sensor = sim
+        .world_mut()
+        .spawn((
+            Sensor,
+            Collider::cuboid(Vec3::splat(0.05)).unwrap(),
+            Position(Vec3::ZERO),
+        ))
+        .id();
+    sim.step();
+    assert_eq!(last_substep(&sim), 0, "still a still world");
+    let entered: Vec<SensorEntered> = sim
+        .world()
+        .resource::<Messages<SensorEntered>>()
+        .iter_current_update_messages()
+        .copied()
+        .collect();
+    assert_eq!(entered, [SensorEntered { sensor, marble }]);
+    sim.world_mut().despawn(sensor);
+    sim.step();
+    let exited: Vec<SensorExited> = sim
+        .world()
+        .resource::<Messages<SensorExited>>()
+        .iter_current_update_messages()
+        .copied()
+        .collect();
+    assert_eq!(exited, [SensorExited { sensor, marble }]);
+    assert!(asleep(&sim, 0));
+}
