@@ -63,7 +63,7 @@ use parry3d::bounding_volume::Aabb;
 use crate::components::Quarantined;
 #[cfg(doc)]
 use crate::config::{GravityTilt, Sleep, StepConfig};
-use crate::pairs::{Grid, KeyMap};
+use crate::pairs::{Grid, StowedImpulses};
 #[cfg(doc)]
 use crate::systems::sleep::{fall_asleep, wake};
 
@@ -136,7 +136,7 @@ pub struct SleepState {
     pub(crate) group_ready: Vec<bool>,
     /// The sleeping marbles' contact impulses, kept for when they wake, and the entity
     /// bits of the marbles falling asleep or waking (sorted).
-    pub(crate) impulses: KeyMap,
+    pub(crate) impulses: StowedImpulses,
     pub(crate) keys: Vec<u64>,
     /// Sleeping marbles despawned (or no longer marbles) since the last step, where they
     /// slept (centre, radius): the marbles resting on them wake.

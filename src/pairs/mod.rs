@@ -75,7 +75,8 @@ use narrow::{
 };
 use rows::{BoardGs, ColourSpan, PairGs, RowBlock, Vel, accumulate, larger};
 use solve::BoardPush;
-use warm::Warm;
+pub(crate) use warm::StowedImpulses;
+use warm::{Warm, scale as warm_scale};
 
 /// A marble's [`NearPieces`] list by its entity, where it has one: how the searches of
 /// the boards after collisions reach the lists the marbles keep as components.
@@ -716,23 +717,35 @@ impl PairSolver {
     /// Copies into `store` the contact impulses kept for warm starting of the marbles whose
     /// entity bits are in `sorted` (ascending), which fall asleep ([`crate::sleep`]): a
     /// pair's key starts with its smaller entity, and a marble falls asleep with every
-    /// marble it touches.
-    pub(crate) fn stow_impulses(&self, sorted: &[u64], store: &mut KeyMap) {
+    /// marble it touches. The store holds them at one substep length, the last solve's
+    /// (those stowed at another are rescaled to it: [`Warm::scale`]).
+    pub(crate) fn stow_impulses(&self, sorted: &[u64], store: &mut StowedImpulses) {
+        let h = self.warm.h();
+        let scale = warm_scale(store.h, h);
+        if scale != 1.0 && h != 0.0 {
+            store.impulses.values_mut().for_each(|l| *l *= scale);
+        }
+        store.h = h;
         for (key, lambda) in self.warm.iter() {
             if sorted.binary_search(&key.0).is_ok() {
-                store.insert(key, lambda);
+                store.impulses.insert(key, lambda);
             }
         }
     }
 
     /// Moves back from `store` the impulses of the marbles in `sorted` (ascending), which
-    /// wake, so that their first substep is warm started as if they had not slept.
-    pub(crate) fn restore_impulses(&mut self, sorted: &[u64], store: &mut KeyMap) {
+    /// wake, so that their first substep is warm started as if they had not slept (at the
+    /// kept impulses' substep length, should it have changed since they were stowed).
+    pub(crate) fn restore_impulses(&mut self, sorted: &[u64], store: &mut StowedImpulses) {
         let warm = &mut self.warm;
-        store.retain(|key, lambda| {
+        let scale = match warm.h() {
+            0.0 => 1.0,
+            h => warm_scale(store.h, h),
+        };
+        store.impulses.retain(|key, lambda| {
             let woken = sorted.binary_search(&key.0).is_ok();
             if woken {
-                warm.restore(*key, *lambda);
+                warm.restore(*key, *lambda * scale);
             }
             !woken
         });

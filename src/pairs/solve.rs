@@ -44,8 +44,10 @@ impl PairSolver {
             self.pair_keys.push((ka.min(kb), ka.max(kb)));
         }
         let (rows, places) = (&mut self.pair_gs, self.rows.iter().map(|r| r.at));
-        self.warm
-            .find_pairs(&self.pair_keys, places, |k, lambda| rows[k].lambda = lambda);
+        let scale = self.warm.scale(p.h);
+        self.warm.find_pairs(&self.pair_keys, places, |k, lambda| {
+            rows[k].lambda = lambda * scale
+        });
     }
 
     /// Step 4 of [`crate::pairs`]: sequential impulses over every touching pair (the rows
@@ -95,9 +97,10 @@ impl PairSolver {
             });
         }
         let (rows, places) = (&mut self.board_gs, self.board_places.iter().copied());
+        let scale = self.warm.scale(p.h);
         self.warm
             .find_boards(&self.board_keys, places, |k, lambda| {
-                rows[k].lambda = lambda
+                rows[k].lambda = lambda * scale
             });
         let h = p.h;
         // From here on `v` is the velocity each marble would reach at the end of the
@@ -178,7 +181,7 @@ impl PairSolver {
             .zip(&self.board_places)
             .zip(&self.board_gs))
         .map(|((&key, &place), gs)| (key, place, gs.lambda));
-        self.warm.keep(pairs, boards);
+        self.warm.keep(pairs, boards, h);
         // The impulses are forces over the substep.
         for (k, b) in bodies.iter_mut().enumerate() {
             let free = b.v0 + b.a * h;

@@ -936,7 +936,11 @@ fn warm_start_finds_what_a_map_of_the_last_impulses_gives() {
                 .collect()
         };
         let (kept_pairs, kept_boards) = (solve(&pairs), solve(&boards));
-        warm.keep(kept_pairs.iter().copied(), kept_boards.iter().copied());
+        warm.keep(
+            kept_pairs.iter().copied(),
+            kept_boards.iter().copied(),
+            0.01,
+        );
         reference.clear();
         for &(key, _, lambda) in kept_pairs.iter().chain(&kept_boards) {
             if lambda > 0.0 {

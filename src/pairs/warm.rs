@@ -37,6 +37,8 @@ pub(crate) struct Warm {
     /// keeps its own ([`Warm::keep`]). Not sized in advance: it grows to the largest group
     /// woken at once and keeps that room, as the sleeping marbles' store does.
     restored: KeyMap,
+    /// The substep length the kept impulses were applied over, s (0: none kept yet).
+    h: f32,
 }
 
 impl Warm {
@@ -83,10 +85,25 @@ impl Warm {
         &mut self,
         pairs: impl Iterator<Item = (Key, u32, f32)>,
         boards: impl Iterator<Item = (Key, u32, f32)>,
+        h: f32,
     ) {
+        self.h = h;
         self.restored.clear();
         self.pairs.keep(pairs);
         self.boards.keep(boards);
+    }
+
+    /// The factor that turns the kept impulses into those of a substep of length `h`: an
+    /// impulse carried over a substep is a force times its length, so a step whose
+    /// substeps changed length (`dt` or `substeps` changed between steps) warm starts
+    /// from the same forces. Exactly 1 while the length holds (no bit changes).
+    pub(crate) fn scale(&self, h: f32) -> f32 {
+        scale(self.h, h)
+    }
+
+    /// The substep length the kept impulses were applied over, s (0: none kept yet).
+    pub(crate) fn h(&self) -> f32 {
+        self.h
     }
 
     /// Every impulse a lookup would find, with its key.
@@ -100,6 +117,31 @@ impl Warm {
     /// Puts back an impulse kept while its marbles slept.
     pub(crate) fn restore(&mut self, key: Key, lambda: f32) {
         self.restored.insert(key, lambda);
+    }
+}
+
+/// The factor from impulses applied over substeps of length `from` to those of length
+/// `to` (forces held): exactly 1 where the lengths are equal or `from` is 0 (unknown).
+pub(crate) fn scale(from: f32, to: f32) -> f32 {
+    if from == to || from == 0.0 {
+        1.0
+    } else {
+        to / from
+    }
+}
+
+/// Contact impulses kept while their marbles sleep, by key, and the substep length they
+/// were applied over ([`crate::sleep`]).
+#[derive(Default, Debug)]
+pub(crate) struct StowedImpulses {
+    pub(super) impulses: KeyMap,
+    pub(super) h: f32,
+}
+
+impl StowedImpulses {
+    /// True when none is kept.
+    pub(crate) fn is_empty(&self) -> bool {
+        self.impulses.is_empty()
     }
 }
 
