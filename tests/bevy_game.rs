@@ -880,3 +880,43 @@ fn an_interpolated_marble_takes_every_teleport_of_a_frame() {
         Vec3::new(-7.0, 2.0, 0.0)
     );
 }
+
+/// The engine's messages are dropped two updates after they were written, as every Bevy
+/// message is: marbles that bounced and came to rest leave none behind (kept, every impact
+/// since the start would stay in memory, and a reader added later would read them all).
+#[test]
+fn messages_are_dropped_after_two_updates() {
+    let mut app = recording_app(DT);
+    floor(&mut app, 0.5);
+    for k in 0..4 {
+        app.world_mut()
+            .spawn((Marble, Transform::from_xyz(k as f32, 0.1, 0.0)));
+    }
+    for _ in 0..256 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    assert!(seen.impacts.len() >= 4, "{} impacts", seen.impacts.len());
+    let last = seen.impacts.len();
+    for _ in 0..3 {
+        app.update();
+    }
+    assert_eq!(
+        app.world().resource::<Seen>().impacts.len(),
+        last,
+        "at rest"
+    );
+    let world = app.world();
+    assert_eq!(
+        world
+            .resource::<bevy_ecs::message::Messages<MarbleImpact>>()
+            .len(),
+        0
+    );
+    assert_eq!(
+        world
+            .resource::<bevy_ecs::message::Messages<ContactStarted>>()
+            .len(),
+        0
+    );
+}

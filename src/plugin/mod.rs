@@ -157,10 +157,9 @@ pub struct MarbleStepPlugin {
 
 impl Plugin for MarbleStepPlugin {
     fn build(&self, app: &mut App) {
-        init_resources(app.world_mut());
-        app.init_resource::<Time<Fixed>>();
-        app.init_resource::<PhysicsClock>();
-        app.init_resource::<LastStep>();
+        // The messages first: registered, the app's message update drops each after two
+        // updates (`add_message` registers only a message whose buffer is not there yet,
+        // and `init_resources` would put it there).
         app.add_message::<crate::events::MarbleImpact>();
         app.add_message::<crate::events::ContactStarted>();
         app.add_message::<crate::events::ContactEnded>();
@@ -168,6 +167,10 @@ impl Plugin for MarbleStepPlugin {
         app.add_message::<crate::events::SensorExited>();
         app.add_message::<crate::validate::QuarantineReport>();
         app.add_message::<crate::validate::StepRefused>();
+        init_resources(app.world_mut());
+        app.init_resource::<Time<Fixed>>();
+        app.init_resource::<PhysicsClock>();
+        app.init_resource::<LastStep>();
         app.add_schedule(substep_schedule());
         app.configure_sets(
             self.schedule,
