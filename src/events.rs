@@ -126,7 +126,7 @@ impl Observed {
     pub(crate) const EXITED: u8 = 16;
 }
 
-/// Where a marble's centre was at the last sensor check (added to marbles while there are
+/// Where a marble's centre was at the start of the step (added to marbles while there are
 /// sensors): a marble that crosses a thin sensor within one step enters and leaves it.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
 pub struct SensorTrack(pub Vec3);

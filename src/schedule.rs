@@ -111,7 +111,11 @@ pub fn substep_schedule() -> Schedule {
     let rolling = |c: Res<StepConfig>| c.rolling;
     let collisions = |c: Res<StepConfig>| c.marble_collisions;
     schedule.add_systems((
-        validate::validate
+        (
+            validate::validate,
+            events::start_sensor_tracks.run_if(events::any_sensor),
+        )
+            .chain()
             .run_if(sleep::first_substep)
             .in_set(MarbleSystems::Validate),
         (

@@ -171,6 +171,20 @@ pub fn finish_touches(
     state.touching.clear();
 }
 
+/// First substep, while there are sensors: each marble's [`SensorTrack`] starts where
+/// the step starts it, so that a marble moved since the last check (by the program, or by
+/// an observer of the last step's events: a labyrinth sending a marble back to its start)
+/// is checked along its motion in this step, not along the jump.
+pub fn start_sensor_tracks(
+    mut marbles: Query<(&Position, &mut SensorTrack), (With<Marble>, Without<Quarantined>)>,
+) {
+    for (position, mut track) in &mut marbles {
+        if track.0 != position.0 {
+            track.0 = position.0;
+        }
+    }
+}
+
 /// Places each sensor [`CarriedBy`] a board at the board's pose composed with its own.
 pub fn carry_sensors(
     mut sensors: Query<(&CarriedBy, &mut Position, &mut Rotation), (With<Sensor>, Without<Board>)>,

@@ -920,3 +920,58 @@ fn messages_are_dropped_after_two_updates() {
         0
     );
 }
+
+/// A marble sent back to the start (a labyrinth's reset: an observer of `SensorEntered`
+/// on the hole sets its `Position`, or the game sets it between steps) does not cross the
+/// sensors between where it was and where it is put: the goal on that line reports
+/// nothing, while the hole it falls into reports each entry.
+#[test]
+fn a_marble_sent_back_crosses_no_sensor_on_the_way() {
+    let mut app = recording_app(DT);
+    app.world_mut().resource_mut::<StepConfig>().gravity = Vec3::ZERO;
+    let cube = || Collider::cuboid(Vec3::splat(0.05)).unwrap();
+    let hole = app
+        .world_mut()
+        .spawn((Sensor, cube(), Transform::from_xyz(1.0, 0.0, 0.0)))
+        .id();
+    let goal = app
+        .world_mut()
+        .spawn((Sensor, cube(), Transform::from_xyz(0.5, 0.0, 0.0)))
+        .id();
+    let start = Vec3::new(0.8, 0.0, 0.0);
+    let marble = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Transform::from_translation(start),
+            Velocity(Vec3::new(1.0, 0.0, 0.0)),
+        ))
+        .id();
+    app.world_mut().entity_mut(marble).observe(
+        move |_: On<SensorEntered>, mut q: Query<&mut Position>| {
+            q.get_mut(marble).unwrap().0 = Vec3::new(0.0, 0.0, 0.0);
+        },
+    );
+    // From 0.8 at 1 m/s: into the hole (x > 0.95) within 10 steps, then from 0 it would
+    // reach the goal (x > 0.45) after 29 more.
+    for _ in 0..20 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    let entered: Vec<_> = seen.entered.iter().map(|(e, _)| e.sensor).collect();
+    assert_eq!(entered, [hole], "{:?}", seen.entered);
+    // Between steps, by the program: back to the start, over the goal.
+    app.world_mut().get_mut::<Position>(marble).unwrap().0 = start;
+    for _ in 0..12 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    let entered: Vec<_> = seen.entered.iter().map(|(e, _)| e.sensor).collect();
+    assert_eq!(entered, [hole, hole], "{:?}", seen.entered);
+    assert!(
+        seen.exited
+            .iter()
+            .all(|(e, _)| e.sensor == hole && e.marble == marble)
+    );
+    let _ = goal;
+}
