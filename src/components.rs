@@ -224,9 +224,9 @@ impl Rotation {
 }
 
 /// Hook of [`Marble`], [`Board`] and [`Sensor`]: a pose left unset takes the entity's
-/// `Transform` (with the `bevy` feature) or the origin and no rotation. Without a
-/// `Transform` yet, in an app with the plugin, one inserted before the next step places
-/// the entity then (`MarbleTransformPlugin`).
+/// `Transform` (with the `bevy` feature) or the origin and no rotation. In an app with the
+/// plugin, a `Transform` inserted or changed before the next step places the entity then
+/// (`MarbleTransformPlugin`).
 fn resolve_unset_pose(
     mut world: bevy_ecs::world::DeferredWorld,
     context: bevy_ecs::lifecycle::HookContext,
@@ -242,13 +242,13 @@ fn resolve_unset_pose(
         return;
     }
     #[cfg(feature = "bevy")]
-    let (translation, rotation) = match world.get::<bevy_transform::components::Transform>(entity) {
-        Some(t) => (t.translation, t.rotation),
-        None => {
-            // A `Transform` inserted later, before the next step, places it then.
-            crate::plugin::note_unplaced(&mut world, entity, position_unset, rotation_unset);
-            (Vec3::ZERO, Quat::IDENTITY)
-        }
+    let (translation, rotation) = {
+        let read = world
+            .get::<bevy_transform::components::Transform>(entity)
+            .map(|t| (t.translation, t.rotation));
+        // A `Transform` inserted or changed later, before the next step, places it then.
+        crate::plugin::note_spawned(&mut world, entity, (position_unset, rotation_unset), read);
+        read.unwrap_or((Vec3::ZERO, Quat::IDENTITY))
     };
     #[cfg(not(feature = "bevy"))]
     let (translation, rotation) = (Vec3::ZERO, Quat::IDENTITY);

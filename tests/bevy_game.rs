@@ -975,3 +975,28 @@ fn a_marble_sent_back_crosses_no_sensor_on_the_way() {
     );
     let _ = goal;
 }
+
+/// A game system that places what was just spawned (`Query<&mut Transform, Added<Marble>>`
+/// in `PreUpdate`, before the frame's fixed step): the marble starts where that system put
+/// it, not where it was spawned.
+#[test]
+fn a_transform_changed_after_the_spawn_places_the_entity() {
+    let mut app = app(DT);
+    app.add_systems(
+        bevy_app::PreUpdate,
+        |mut q: Query<&mut Transform, Added<Marble>>| {
+            for mut t in &mut q {
+                t.translation.x = 5.0;
+            }
+        },
+    );
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Transform::from_xyz(0.0, 1.0, 0.0)))
+        .id();
+    app.update();
+    let p = app.world().get::<Position>(marble).unwrap().0;
+    let want = Vec3::new(5.0, 1.0 - 0.5 * G * (DT * DT) as f32, 0.0);
+    assert!((p - want).length() <= 1e-6, "{p}");
+    assert_eq!(app.world().get::<Transform>(marble).unwrap().translation, p);
+}

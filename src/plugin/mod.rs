@@ -31,7 +31,7 @@ mod transform;
 pub use diagnostics::{MarbleDiagnostics, MarbleDiagnosticsPlugin};
 pub use interpolation::{MarbleInterpolationPlugin, PhysicsPoses, TransformInterpolation};
 pub use transform::MarbleTransformPlugin;
-pub(crate) use transform::note_unplaced;
+pub(crate) use transform::note_spawned;
 
 /// Runs the marble physics in a Bevy app: every plugin of [`MarblePhysicsPlugins`].
 ///

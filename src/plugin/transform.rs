@@ -20,8 +20,9 @@ use crate::components::{Board, Marble, Position, Rotation, Sensor};
 ///   `Position` starts at the `Transform`'s translation (a board or sensor also at its
 ///   rotation); given both, `Position` and `Rotation` win. (This is the components' own
 ///   spawn hook, so it holds in a plain `World` too.)
-/// - An entity spawned with neither (at the origin) that is given a `Transform` by a later
-///   command, before the next step, starts there too (a pose given by then wins).
+/// - An entity spawned without a pose whose `Transform` is given or changed by a later
+///   command or system, before the next step, starts there too (a pose given by then
+///   wins).
 /// - A `Transform` the program changes after spawning moves its entity there before the
 ///   next physics step: a **teleport**. The marble keeps its velocity and spin (set them
 ///   too for a fresh start); its contacts are found afresh at the new place in the next
@@ -38,7 +39,7 @@ pub struct MarbleTransformPlugin {
 impl Plugin for MarbleTransformPlugin {
     fn build(&self, app: &mut App) {
         app.init_resource::<TransformWrites>();
-        app.init_resource::<Unplaced>();
+        app.init_resource::<Spawned>();
         app.add_systems(
             self.schedule,
             (
@@ -56,35 +57,51 @@ pub struct TransformWrites {
     pub(super) tick: Tick,
 }
 
-/// Marbles, boards and sensors spawned with neither a pose nor a `Transform`, since the
-/// last step (a resource): each with whether its position and its rotation were unset,
-/// so that a `Transform` inserted by a later command places it as if it had been spawned
-/// with it.
+/// Marbles, boards and sensors spawned without a pose since the last step (a resource):
+/// each with whether its position and its rotation were unset, and the `Transform` pose
+/// the spawn hook took them from (`None`: it had none, they took the origin), so that a
+/// `Transform` inserted or changed by a later command or system, before the next step,
+/// places the entity as if it had been spawned with it.
 #[derive(Resource, Default, Debug)]
-pub struct Unplaced(Vec<(Entity, bool, bool)>);
+pub struct Spawned(Vec<SpawnedPose>);
 
-/// Notes an entity the spawn hook placed at the origin for want of a `Transform`, in an
-/// app with [`MarbleTransformPlugin`] (elsewhere nothing would take it up).
-pub(crate) fn note_unplaced(
+/// One entry of [`Spawned`].
+#[derive(Clone, Copy, Debug)]
+struct SpawnedPose {
+    entity: Entity,
+    position_unset: bool,
+    rotation_unset: bool,
+    read: Option<(Vec3, Quat)>,
+}
+
+/// Notes an entity whose pose the spawn hook set (`unset`: whether its position and its
+/// rotation were not given) from the `Transform` pose `read` (or the origin), in an app
+/// with [`MarbleTransformPlugin`] (elsewhere nothing would take it up).
+pub(crate) fn note_spawned(
     world: &mut bevy_ecs::world::DeferredWorld,
     entity: Entity,
-    position: bool,
-    rotation: bool,
+    (position_unset, rotation_unset): (bool, bool),
+    read: Option<(Vec3, Quat)>,
 ) {
-    if let Some(mut unplaced) = world.get_resource_mut::<Unplaced>() {
-        unplaced.0.push((entity, position, rotation));
+    if let Some(mut spawned) = world.get_resource_mut::<Spawned>() {
+        spawned.0.push(SpawnedPose {
+            entity,
+            position_unset,
+            rotation_unset,
+            read,
+        });
     }
 }
 
-/// Places every entity of [`Unplaced`] given a `Transform` since it was spawned, where its
-/// pose is still the origin the spawn hook gave it; then moves every marble, board and
-/// sensor whose `Transform` the program changed since the engine last wrote it to that
-/// `Transform` (see [`MarbleTransformPlugin`]).
+/// Places every entity of [`Spawned`] whose `Transform` came or changed since the spawn
+/// hook read it, where its pose is still the one the hook gave it; then moves every
+/// marble, board and sensor whose `Transform` the program changed since the engine last
+/// wrote it to that `Transform` (see [`MarbleTransformPlugin`]).
 #[allow(clippy::type_complexity)]
 pub fn read_transforms(
     writes: Res<TransformWrites>,
     ticks: SystemChangeTick,
-    mut unplaced: ResMut<Unplaced>,
+    mut spawned: ResMut<Spawned>,
     mut entities: Query<
         (
             Ref<Transform>,
@@ -99,17 +116,22 @@ pub fn read_transforms(
         ),
     >,
 ) {
-    for (entity, position_unset, rotation_unset) in unplaced.0.drain(..) {
-        // Changed: its `Transform` was added since the last step (or it has none).
-        let Ok((transform, mut position, rotation, _, poses)) = entities.get_mut(entity) else {
+    for s in spawned.0.drain(..) {
+        // Changed: its `Transform` came or was written since the last step.
+        let Ok((transform, mut position, rotation, _, poses)) = entities.get_mut(s.entity) else {
             continue;
         };
-        if position_unset && position.0 == Vec3::ZERO {
+        let now = (transform.translation, transform.rotation);
+        if s.read == Some(now) {
+            continue;
+        }
+        let (translation, turn) = s.read.unwrap_or((Vec3::ZERO, Quat::IDENTITY));
+        if s.position_unset && position.0 == translation {
             position.0 = transform.translation;
         }
         let mut r = None;
         if let Some(mut rotation) = rotation {
-            if rotation_unset && rotation.0 == Quat::IDENTITY {
+            if s.rotation_unset && rotation.0 == turn {
                 rotation.0 = transform.rotation;
             }
             r = Some(rotation.0);
