@@ -319,6 +319,47 @@ impl<'a> MarbleValues<'a> {
     }
 }
 
+/// A board's [`NextPose`](crate::components::NextPose), for a board at `position` and
+/// `rotation` and a step of `dt`: within the range of a position, a rotation finite and of
+/// non-zero length, and reached within the step at a velocity and spin a board may have
+/// (what `drive_boards` gives it); the first bad value, if any, as `NextPose`'s.
+pub(crate) fn check_next_pose(
+    next: &crate::components::NextPose,
+    (position, rotation): (Vec3, Quat),
+    dt: f32,
+) -> Result<(), InvalidValue> {
+    const COMPONENT: &str = "NextPose";
+    within(COMPONENT, next.position, MAX_COORDINATE, POSITION_RULE)?;
+    if !(next.rotation.is_finite() && next.rotation.length_squared() > 0.0) {
+        return Err(invalid(
+            COMPONENT,
+            "a rotation finite and of non-zero length",
+            next.rotation,
+        ));
+    }
+    let velocity = (next.position - position) / dt;
+    if !velocity.is_finite() || velocity.abs().max_element() > MAX_SPEED {
+        return Err(invalid(
+            COMPONENT,
+            "reached within one step at a velocity within 1e5 m/s",
+            next.position,
+        ));
+    }
+    let mut turn = next.rotation.normalize() * rotation.conjugate();
+    if turn.w < 0.0 {
+        turn = -turn;
+    }
+    let spin = turn.to_scaled_axis() / dt;
+    if !spin.is_finite() || spin.abs().max_element() > MAX_BOARD_SPIN {
+        return Err(invalid(
+            COMPONENT,
+            "reached within one step at a spin within 1e4 rad/s",
+            next.rotation,
+        ));
+    }
+    Ok(())
+}
+
 /// A board's pose, motion and material: the first bad value, if any (a board's spin
 /// within [`MAX_BOARD_SPIN`]).
 pub(crate) fn check_board(

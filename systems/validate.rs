@@ -8,12 +8,14 @@ use glam::Vec3;
 use crate::board_contact::NearPieces;
 use crate::components::{
     Acceleration, AngularVelocity, Board, Contacts, Force, Friction, Marble, Mass, MoreContacts,
-    Position, PositionCarry, Quarantined, Radius, Restitution, RollingResistance, Rotation,
-    SpinDamping, StepStart, Velocity,
+    NextPose, Position, PositionCarry, Quarantined, Radius, Restitution, RollingResistance,
+    Rotation, SpinDamping, StepStart, Velocity,
 };
+use crate::config::StepConfig;
 use crate::sleep::Sleeping;
 use crate::validate::{
     InvalidValue, MAX_COORDINATE, MAX_SPEED, MarbleValues, QuarantineReport, check_board,
+    check_next_pose,
 };
 
 /// Quarantines `entity` for `reason`: the component, a message and a log warning.
@@ -35,7 +37,7 @@ pub(crate) fn quarantine(
 /// caught here too, where that step left it.
 #[expect(clippy::type_complexity, reason = "a marble's components, read once")]
 pub fn validate(
-    mut commands: Commands,
+    (mut commands, config): (Commands, Res<StepConfig>),
     mut reports: ResMut<Messages<QuarantineReport>>,
     awake: Query<
         (
@@ -89,6 +91,7 @@ pub fn validate(
             (&Position, &Rotation, &Velocity, &AngularVelocity),
             &Restitution,
             &Friction,
+            Option<&NextPose>,
         ),
         (With<Board>, Without<Quarantined>),
     >,
@@ -187,8 +190,13 @@ pub fn validate(
             quarantine(&mut commands, &mut reports, entity, reason);
         }
     }
-    for (entity, pose, restitution, friction) in &boards {
-        if let Err(reason) = check_board(pose, restitution, friction) {
+    for (entity, pose, restitution, friction, next) in &boards {
+        let check = check_board(pose, restitution, friction).and_then(|()| {
+            next.map_or(Ok(()), |next| {
+                check_next_pose(next, (pose.0.0, pose.1.0), config.dt)
+            })
+        });
+        if let Err(reason) = check {
             quarantine(&mut commands, &mut reports, entity, reason);
         }
     }

@@ -426,6 +426,67 @@ fn a_bad_board_is_quarantined_and_out_of_the_step() {
     assert!((x.y - want).abs() <= 1e-4, "y = {}, want {want}", x.y);
 }
 
+/// A board driven to a bad pose (`NextPose` with a NaN, or one it could reach only
+/// faster than the supported speed or spin) is quarantined before it moves, where it is,
+/// reported as `NextPose`: the marble above falls freely through where it was.
+#[test]
+fn a_board_driven_to_a_bad_pose_is_quarantined_where_it_is() {
+    use glam::Quat;
+    let dt = world().world().resource::<StepConfig>().dt;
+    // A quarter turn in a step: a spin of π/(2 dt), past the supported range at dt = 1e-4 s.
+    let short = 1e-4;
+    for (next, dt) in [
+        (
+            NextPose {
+                position: Vec3::new(f32::NAN, 0.0, 0.0),
+                rotation: Quat::IDENTITY,
+            },
+            dt,
+        ),
+        (
+            NextPose {
+                position: Vec3::ZERO,
+                rotation: Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+            },
+            dt,
+        ),
+        (
+            NextPose {
+                position: Vec3::new(2.0 * MAX_SPEED * dt, 0.0, 0.0),
+                rotation: Quat::IDENTITY,
+            },
+            dt,
+        ),
+        (
+            NextPose {
+                position: Vec3::ZERO,
+                rotation: Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+            },
+            short,
+        ),
+    ] {
+        assert!(std::f32::consts::FRAC_PI_2 / short > MAX_BOARD_SPIN);
+        let mut sim = world();
+        sim.world_mut().resource_mut::<StepConfig>().dt = dt;
+        let floor = sim.boards()[0];
+        let before = *sim.world().get::<Position>(floor).unwrap();
+        sim.world_mut().entity_mut(floor).insert(next);
+        let steps = 60;
+        let r = step(&mut sim, steps);
+        assert!(sim.world().get::<Quarantined>(floor).is_some(), "{next:?}");
+        assert_eq!(r.len(), 1, "{r:?}");
+        assert_eq!(r[0].reason.component, "NextPose");
+        assert_eq!(*sim.world().get::<Position>(floor).unwrap(), before);
+        let v = *sim.world().get::<Velocity>(floor).unwrap();
+        assert_eq!(v.0, Vec3::ZERO);
+        // Semi-implicit Euler's free fall: y = y0 − g dt² n(n+1)/2.
+        let n = steps as f32;
+        let want = 0.5 - 9.81 * dt * dt * n * (n + 1.0) / 2.0;
+        let (x, _) = sim.marble_state(0);
+        assert!((x.y - want).abs() <= 1e-4, "y = {}, want {want}", x.y);
+    }
+}
+
 /// The newtypes' constructors refuse what the step would quarantine, at the edges.
 #[test]
 fn constructors_refuse_bad_values_at_their_edges() {
