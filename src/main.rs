@@ -114,9 +114,18 @@ fn main() -> ExitCode {
                 let _ = e.print();
                 return ExitCode::SUCCESS;
             }
+            // clap's first paragraph, on one line: what is wrong and what it names (a
+            // missing argument's name comes on the next line).
             let text = e.to_string();
-            let first = text.lines().next().unwrap_or("error: bad arguments");
-            eprintln!("{first}");
+            let first: Vec<&str> = text
+                .lines()
+                .take_while(|l| !l.trim().is_empty())
+                .map(str::trim)
+                .collect();
+            match first.join(" ") {
+                line if line.starts_with("error:") => eprintln!("{line}"),
+                _ => eprintln!("error: bad arguments"),
+            }
             return ExitCode::from(2);
         }
     };
@@ -124,6 +133,7 @@ fn main() -> ExitCode {
         None => run_default(),
         Some(Command::Run(args)) => run_file(&args),
         Some(Command::Check { scene }) => load(&scene).map(|s| {
+            warn(&scene, &s);
             let sensors = match s.sensors.len() {
                 0 => String::new(),
                 n => format!(", {n} sensors"),
@@ -194,12 +204,58 @@ fn tradeoff(out: Option<PathBuf>, quick: bool) -> Result<(), Failure> {
 }
 
 fn load(path: &Path) -> Result<Scene, Failure> {
-    let scene =
-        Scene::from_path(path).map_err(|e| input_error(format!("{}: {e}", path.display())))?;
+    Scene::from_path(path).map_err(|e| input_error(format!("{}: {e}", path.display())))
+}
+
+/// Prints the scene's warnings, once all of the input is accepted (input at fault gets
+/// one line on stderr, its error).
+fn warn(path: &Path, scene: &Scene) {
     for w in scene.warnings() {
         eprintln!("warning: {}: {w}", path.display());
     }
-    Ok(scene)
+}
+
+/// Refuses output paths that name the same file, or a file the run reads (`inputs`): the
+/// run would write one output over another, or over its own scene.
+fn check_outputs(
+    outputs: &[(&str, Option<&Path>)],
+    inputs: &[(&str, Option<&Path>)],
+) -> Result<(), Failure> {
+    for (k, &(flag, path)) in outputs.iter().enumerate() {
+        let Some(path) = path else { continue };
+        let earlier = outputs[..k]
+            .iter()
+            .map(|&(f, p)| (f, p, "the same file as"));
+        let read = inputs.iter().map(|&(f, p)| (f, p, "the file read as"));
+        for (other, p, what) in earlier.chain(read) {
+            if p.is_some_and(|p| same_file(p, path)) {
+                return Err(input_error(format!(
+                    "{flag} {}: {what} {other}",
+                    path.display()
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether two paths name one file: compared resolved (the file itself where it exists,
+/// else its resolved directory and name).
+fn same_file(a: &Path, b: &Path) -> bool {
+    fn resolved(p: &Path) -> PathBuf {
+        if let Ok(c) = p.canonicalize() {
+            return c;
+        }
+        let dir = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        match (dir.canonicalize(), p.file_name()) {
+            (Ok(d), Some(name)) => d.join(name),
+            _ => p.to_path_buf(),
+        }
+    }
+    a == b || resolved(a) == resolved(b)
 }
 
 fn run_file(args: &RunArgs) -> Result<(), Failure> {
@@ -217,6 +273,18 @@ fn run_file(args: &RunArgs) -> Result<(), Failure> {
         }
         None => Vec::new(),
     };
+    check_outputs(
+        &[
+            ("--csv", args.csv.as_deref()),
+            ("--plot", args.plot.as_deref()),
+            ("--html", args.html.as_deref()),
+        ],
+        &[
+            ("SCENE", Some(&args.scene)),
+            ("--poses", args.poses.as_deref()),
+        ],
+    )?;
+    warn(&args.scene, &scene);
     let outputs = Outputs {
         poses,
         csv: args.csv.clone(),

@@ -359,18 +359,36 @@ impl Scene {
     /// Parses and validates a RON scene.
     pub fn from_ron_str(text: &str) -> Result<Scene, SceneError> {
         // `mass: 0.01` rather than `mass: Some(0.01)`.
-        let scene: Scene = ron::Options::default()
-            .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
-            .from_str(text)
+        let options = ron::Options::default()
+            .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
+        let mut de = ron::Deserializer::from_str_with_options(text, &options)
             .map_err(|e| SceneError::Parse(e.to_string()))?;
+        // Through `serde_path_to_error`, so that a value of the wrong type or out of its
+        // type's range is named by its field path, and by the text it was at.
+        let scene: Scene = match serde_path_to_error::deserialize(&mut de) {
+            Ok(scene) => scene,
+            Err(e) => {
+                let path = e.path().to_string();
+                let spanned = de.span_error(e.into_inner());
+                let at = span_text(text, &spanned.span)
+                    .map(|t| format!(", got {t}"))
+                    .unwrap_or_default();
+                let message = format!("{}{at} ({})", spanned.code, spanned.span);
+                return Err(parse_error(&path, message));
+            }
+        };
+        de.end()
+            .map_err(|e| SceneError::Parse(de.span_error(e).to_string()))?;
         scene.validate()?;
         Ok(scene)
     }
 
     /// Parses and validates a JSON scene.
     pub fn from_json_str(text: &str) -> Result<Scene, SceneError> {
-        let scene: Scene =
-            serde_json::from_str(text).map_err(|e| SceneError::Parse(e.to_string()))?;
+        let mut de = serde_json::Deserializer::from_str(text);
+        let scene: Scene = serde_path_to_error::deserialize(&mut de)
+            .map_err(|e| parse_error(&e.path().to_string(), e.into_inner().to_string()))?;
+        de.end().map_err(|e| SceneError::Parse(e.to_string()))?;
         scene.validate()?;
         Ok(scene)
     }
@@ -740,6 +758,42 @@ impl<F: Fn() -> String> FieldName for Lazy<F> {
     fn name(&self) -> String {
         (self.0)()
     }
+}
+
+/// A parse error at field `path` (`serde_path_to_error`'s: `.` for the whole scene).
+fn parse_error(path: &str, message: String) -> SceneError {
+    match path {
+        "." | "" => SceneError::Parse(message),
+        path => SceneError::Parse(format!("{path}: {message}")),
+    }
+}
+
+/// The text of `text` that `span` covers (RON's 1-based lines and columns of characters),
+/// or, for a span of at most one character (where the parser stopped), the value there (up
+/// to the next `,`, bracket or line end); trimmed, `None` where there is none.
+fn span_text<'a>(text: &'a str, span: &ron::error::Span) -> Option<&'a str> {
+    let offset = |p: &ron::error::Position| {
+        let line_start: usize = text
+            .split_inclusive('\n')
+            .take(p.line.checked_sub(1)?)
+            .map(str::len)
+            .sum();
+        let line = &text[line_start..];
+        let col = line
+            .char_indices()
+            .nth(p.col.checked_sub(1)?)
+            .map_or(line.len(), |(i, _)| i);
+        Some(line_start + col)
+    };
+    let (start, end) = (offset(&span.start)?, offset(&span.end)?);
+    let end = if text.get(start..end)?.chars().count() <= 1 {
+        let rest = &text[start..];
+        start + rest.find([',', ')', ']', '}', '\n']).unwrap_or(rest.len())
+    } else {
+        end
+    };
+    let t = text.get(start..end)?.trim();
+    (!t.is_empty()).then_some(t)
 }
 
 fn invalid<T>(

@@ -329,7 +329,72 @@ fn cli_bad_input_exits_2_with_one_line_and_no_output() {
     )
     .unwrap();
     std::fs::write(dir.join("syntax.json"), "{\"dt\": ").unwrap();
+    std::fs::write(dir.join("big.ron"), "(substeps: 4294967296)").unwrap();
+    std::fs::write(dir.join("big.json"), r#"{"substeps": 4e9}"#).unwrap();
+    std::fs::write(
+        dir.join("types.ron"),
+        r#"(marbles: [(position: (0.0, 0.0, 0.0)), (position: (0.0, 0.0, 0.0), radius: "big")])"#,
+    )
+    .unwrap();
+    // Accepted with a warning (ccd off), which is not printed when other input is at fault.
+    let warned = "(ccd: false, marbles: [(position: (0.0, 1.0, 0.0))])";
+    std::fs::write(dir.join("warned.ron"), warned).unwrap();
+    std::fs::write(dir.join("poses.csv"), "junk\n").unwrap();
+    std::fs::write(dir.join("header.csv"), "step,board,x,y,z,qx,qy,qz,qw\n").unwrap();
     let cases: &[(&[&str], &str)] = &[
+        (
+            &["check", "big.ron"],
+            "error: big.ron: substeps: Integer is out of bounds, got 4294967296",
+        ),
+        (
+            &["check", "big.json"],
+            "error: big.json: substeps: invalid type: floating point `4000000000.0`",
+        ),
+        (
+            &["check", "types.ron"],
+            r#"error: types.ron: marbles[1].radius: Expected float, got "big""#,
+        ),
+        (
+            &["run"],
+            "error: the following required arguments were not provided: <SCENE>",
+        ),
+        (
+            &[
+                "run",
+                "warned.ron",
+                "--poses",
+                "poses.csv",
+                "--csv",
+                "out.csv",
+            ],
+            "error: poses.csv: line 1",
+        ),
+        (
+            &[
+                "run",
+                "warned.ron",
+                "--csv",
+                "out.same",
+                "--plot",
+                "out.same",
+            ],
+            "error: --plot out.same: the same file as --csv",
+        ),
+        (
+            &["run", "warned.ron", "--csv", "./warned.ron"],
+            "error: --csv ./warned.ron: the file read as SCENE",
+        ),
+        (
+            &[
+                "run",
+                "warned.ron",
+                "--html",
+                "header.csv",
+                "--poses",
+                "header.csv",
+            ],
+            "error: --html header.csv: the file read as --poses",
+        ),
         (
             &["run", "scene.ron", "--csv", "out.csv"],
             "error: scene.ron: marbles[3].radius must be > 0, got -0.01",
@@ -370,6 +435,10 @@ fn cli_bad_input_exits_2_with_one_line_and_no_output() {
         .filter(|n| n.contains("out"))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("warned.ron")).unwrap(),
+        warned
+    );
 }
 
 #[test]
