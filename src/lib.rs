@@ -40,9 +40,9 @@ pub use simulation::Simulation;
 /// Everything a user of the engine needs.
 pub mod prelude {
     pub use crate::components::{
-        AngularVelocity, Board, BoardContacts, Collider, Contact, ContactKind, ContactList,
-        Contacts, Force, Friction, Marble, Mass, NextPose, Position, Quarantined, Radius,
-        Restitution, Rotation, Sensor, Velocity,
+        AngularVelocity, Board, BoardContacts, CarriedBy, Collider, Contact, ContactKind,
+        ContactList, Contacts, Force, Friction, Marble, Mass, NextPose, Position, Quarantined,
+        Radius, Restitution, Rotation, Sensor, Velocity,
     };
     pub use crate::config::{GravityTilt, Integrator, Preset, Sleep, StepConfig};
     pub use crate::events::{

@@ -1000,3 +1000,49 @@ fn a_transform_changed_after_the_spawn_places_the_entity() {
     assert!((p - want).length() <= 1e-6, "{p}");
     assert_eq!(app.world().get::<Transform>(marble).unwrap().translation, p);
 }
+
+/// A sensor carried by a turning board (a labyrinth's hole, drawn with a mesh) has its
+/// pose written back into its `Transform` each step, as a board's is: the board's pose
+/// composed with the sensor's in the board's frame.
+#[test]
+fn a_carried_sensor_shows_where_its_board_carries_it() {
+    let mut app = app(DT);
+    let board = app
+        .world_mut()
+        .spawn((
+            Board,
+            Collider::cuboid(Vec3::new(1.0, 0.05, 1.0)).unwrap(),
+            Transform::default(),
+            AngularVelocity(Vec3::new(0.5, 0.0, 0.0)),
+        ))
+        .id();
+    let local = Vec3::new(0.3, 0.05, 0.4);
+    let hole = app
+        .world_mut()
+        .spawn((
+            Sensor,
+            Collider::cuboid(Vec3::splat(0.02)).unwrap(),
+            Transform::from_translation(local),
+            CarriedBy {
+                board,
+                position: local,
+                rotation: Quat::IDENTITY,
+            },
+        ))
+        .id();
+    for _ in 0..16 {
+        app.update();
+    }
+    let w = app.world();
+    let turn = w.get::<Rotation>(board).unwrap().0;
+    assert!(turn.angle_between(Quat::IDENTITY) > 0.1, "{turn}");
+    let want = turn * local;
+    let t = w.get::<Transform>(hole).unwrap();
+    assert!(
+        (t.translation - want).length() <= 1e-6,
+        "{} vs {want}",
+        t.translation
+    );
+    assert!(t.rotation.angle_between(turn) <= 1e-6);
+    assert_eq!(t.translation, w.get::<Position>(hole).unwrap().0);
+}

@@ -29,8 +29,8 @@ use crate::components::{Board, Marble, Position, Rotation, Sensor};
 ///   substep, a sleeping marble wakes, and an interpolated entity jumps there without a
 ///   streak. A teleported board keeps its velocity; marbles it now overlaps are pushed
 ///   out. To move a board smoothly, give it a [`NextPose`](crate::components::NextPose).
-/// - After every step, each marble's and board's pose is written into its `Transform`
-///   (a marble's rotation only when it has a `Rotation`); entities with
+/// - After every step, each marble's, board's and sensor's pose is written into its
+///   `Transform` (a marble's rotation only when it has a `Rotation`); entities with
 ///   [`TransformInterpolation`] are eased every frame instead.
 pub struct MarbleTransformPlugin {
     pub(super) schedule: Interned<dyn ScheduleLabel>,
@@ -170,9 +170,9 @@ pub fn read_transforms(
     }
 }
 
-/// Writes marble positions (and orientations, for marbles that carry a `Rotation`) and
-/// board poses into their `Transform`s; entities with [`TransformInterpolation`] are left
-/// to the interpolation.
+/// Writes marble positions (and orientations, for marbles that carry a `Rotation`), board
+/// poses and the poses of sensors that moved (carried by a board) into their
+/// `Transform`s; entities with [`TransformInterpolation`] are left to the interpolation.
 #[allow(clippy::type_complexity)]
 pub fn sync_transforms(
     mut writes: ResMut<TransformWrites>,
@@ -193,6 +193,15 @@ pub fn sync_transforms(
             Without<TransformInterpolation>,
         ),
     >,
+    mut sensors: Query<
+        (&Position, &Rotation, &mut Transform),
+        (
+            With<Sensor>,
+            Without<Board>,
+            Without<Marble>,
+            Without<TransformInterpolation>,
+        ),
+    >,
 ) {
     for (position, rotation, mut transform) in &mut marbles {
         transform.translation = position.0;
@@ -203,6 +212,14 @@ pub fn sync_transforms(
     for (position, rotation, mut transform) in &mut boards {
         transform.translation = position.0;
         transform.rotation = rotation.0;
+    }
+    // A sensor moves only when carried or moved by the program: its `Transform` is written
+    // (and marked changed) only then.
+    for (position, rotation, mut transform) in &mut sensors {
+        if (transform.translation, transform.rotation) != (position.0, rotation.0) {
+            transform.translation = position.0;
+            transform.rotation = rotation.0;
+        }
     }
     writes.tick = ticks.this_run();
 }
