@@ -10,7 +10,7 @@ use bevy_transform::components::Transform;
 use glam::{Quat, Vec3};
 
 use super::{MarblePluginSystems, stepped};
-use crate::components::{Position, Rotation};
+use crate::components::{Marble, Position, Rotation};
 
 /// Marks a marble or board whose `Transform` is eased, every frame, between its last two
 /// physics poses by `Time<Fixed>::overstep_fraction()`, after the fixed-step loop of that
@@ -37,6 +37,10 @@ pub struct PhysicsPoses {
     /// The `Transform` the easing wrote or the step took last: one that differs was set
     /// by the program.
     pub(super) written: Option<(Vec3, Quat)>,
+    /// A marble's position where the step's own stages left it (noted in its last
+    /// substep, before the engine's events reach observers): a position that differs
+    /// after the step was set by an observer.
+    pub(super) stepped_to: Option<Vec3>,
 }
 
 impl PhysicsPoses {
@@ -91,6 +95,14 @@ impl Plugin for MarbleInterpolationPlugin {
             RunFixedMainLoop,
             ease_transforms.in_set(RunFixedMainLoopSystems::AfterFixedMainLoop),
         );
+        app.add_systems(
+            crate::schedule::MarbleSubstep,
+            note_stepped_poses
+                .run_if(crate::systems::forces::step_ends)
+                .in_set(crate::schedule::MarbleSystems::Events)
+                .after(crate::systems::events::find_observers)
+                .before(crate::systems::events::record_touches),
+        );
     }
 }
 
@@ -118,7 +130,21 @@ pub fn catch_teleports(
     }
 }
 
-/// After a step: the poses move on by one.
+/// In the step's last substep, before the engine's events are sent: where the step's
+/// stages left each interpolated marble (what an observer of those events may change).
+pub fn note_stepped_poses(
+    mut marbles: Query<
+        (&Position, &mut PhysicsPoses),
+        (With<TransformInterpolation>, With<Marble>),
+    >,
+) {
+    for (position, mut poses) in &mut marbles {
+        poses.stepped_to = Some(position.0);
+    }
+}
+
+/// After a step: the poses move on by one; a marble an observer moved during the step
+/// jumps there (no easing from where it was).
 pub fn record_poses(
     mut entities: Query<
         (&Position, Option<&Rotation>, &mut PhysicsPoses),
@@ -126,8 +152,14 @@ pub fn record_poses(
     >,
 ) {
     for (position, rotation, mut poses) in &mut entities {
-        poses.previous = poses.current;
-        poses.current = pose(position, rotation);
+        let now = pose(position, rotation);
+        match poses.stepped_to.take() {
+            Some(stepped) if stepped != position.0 => poses.reset(now.0, now.1),
+            _ => {
+                poses.previous = poses.current;
+                poses.current = now;
+            }
+        }
     }
 }
 
