@@ -1089,3 +1089,30 @@ fn an_interpolated_marble_moved_by_an_observer_jumps() {
     }
     assert!(sent_back);
 }
+
+/// An interpolated marble without a `Transform` (a headless game's) still has its last two
+/// physics poses kept, and a teleport by its `Position` between steps starts them afresh.
+#[test]
+fn an_interpolated_marble_without_a_transform_keeps_its_poses() {
+    let mut app = app(DT);
+    app.world_mut().resource_mut::<StepConfig>().gravity = Vec3::ZERO;
+    let marble = app
+        .world_mut()
+        .spawn((
+            Marble,
+            TransformInterpolation,
+            Position(Vec3::ZERO),
+            Velocity(Vec3::new(1.0, 0.0, 0.0)),
+        ))
+        .id();
+    for _ in 0..3 {
+        app.update();
+    }
+    let to = Vec3::new(-5.0, 0.0, 0.0);
+    app.world_mut().get_mut::<Position>(marble).unwrap().0 = to;
+    app.update();
+    let poses = *app.world().get::<bevy_marble::plugin::PhysicsPoses>(marble).unwrap();
+    assert_eq!(poses.previous.0, to);
+    let dx = (poses.current.0 - to - Vec3::new(DT as f32, 0.0, 0.0)).length();
+    assert!(dx <= 1e-6, "{:?}", poses.current);
+}

@@ -115,13 +115,20 @@ fn pose(position: &Position, rotation: Option<&Rotation>) -> (Vec3, Quat) {
 /// left it was moved by the program: it jumps (no easing from the old place).
 pub fn catch_teleports(
     mut entities: Query<
-        (&Position, Option<&Rotation>, &mut PhysicsPoses, &Transform),
+        (
+            &Position,
+            Option<&Rotation>,
+            &mut PhysicsPoses,
+            Option<&Transform>,
+        ),
         With<TransformInterpolation>,
     >,
 ) {
     for (position, rotation, mut poses, transform) in &mut entities {
         let now = pose(position, rotation);
-        if !poses.initialised {
+        if !poses.initialised
+            && let Some(transform) = transform
+        {
             poses.saw(transform);
         }
         if !poses.initialised || now != poses.current {
