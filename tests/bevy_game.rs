@@ -1111,7 +1111,10 @@ fn an_interpolated_marble_without_a_transform_keeps_its_poses() {
     let to = Vec3::new(-5.0, 0.0, 0.0);
     app.world_mut().get_mut::<Position>(marble).unwrap().0 = to;
     app.update();
-    let poses = *app.world().get::<bevy_marble::plugin::PhysicsPoses>(marble).unwrap();
+    let poses = *app
+        .world()
+        .get::<bevy_marble::plugin::PhysicsPoses>(marble)
+        .unwrap();
     assert_eq!(poses.previous.0, to);
     let dx = (poses.current.0 - to - Vec3::new(DT as f32, 0.0, 0.0)).length();
     assert!(dx <= 1e-6, "{:?}", poses.current);
