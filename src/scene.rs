@@ -636,9 +636,11 @@ impl ShapeDesc {
     }
 }
 
-/// A quaternion from `[x, y, z, w]`, normalized.
+/// A quaternion from `[x, y, z, w]`, normalized (in f64, so that components far from 1,
+/// whose squares overflow or underflow f32, normalize too).
 pub fn quat(q: [f32; 4]) -> Quat {
-    Quat::from_array(q).normalize()
+    let n = norm64(q);
+    Quat::from_array(q.map(|x| (f64::from(x) / n) as f32)).normalize()
 }
 
 pub(crate) fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Result<(), SceneError> {
@@ -656,7 +658,12 @@ pub(crate) fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Resul
                 return invalid(&format!("{field}.TriMesh.indices"), "non-empty", "[]");
             }
             for (i, v) in vertices.iter().enumerate() {
-                finite3(&format!("{field}.TriMesh.vertices[{i}]"), *v)?;
+                in_range(
+                    &format!("{field}.TriMesh.vertices[{i}]"),
+                    *v,
+                    MAX_COORDINATE,
+                    POSITION_RANGE,
+                )?;
             }
             for (i, tri) in indices.iter().enumerate() {
                 for (k, &ix) in tri.iter().enumerate() {
@@ -669,7 +676,7 @@ pub(crate) fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Resul
                     }
                 }
                 let [a, b, c] = tri.map(|ix| Vec3::from_array(vertices[ix as usize]));
-                if (b - a).cross(c - a).length_squared() <= 0.0 {
+                if !((b - a).cross(c - a).length_squared() > 0.0) {
                     return invalid(
                         &format!("{field}.TriMesh.indices[{i}]"),
                         "a triangle of non-zero area",
@@ -726,7 +733,12 @@ pub(crate) fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Resul
             for (i, p) in parts.iter().enumerate() {
                 let f = format!("{field}.Compound[{i}]");
                 validate_shape(&format!("{f}.shape"), &p.shape, false)?;
-                finite3(&format!("{f}.position"), p.position)?;
+                in_range(
+                    &format!("{f}.position"),
+                    p.position,
+                    MAX_COORDINATE,
+                    POSITION_RANGE,
+                )?;
                 rotation(&format!("{f}.rotation"), p.rotation)?;
             }
             Ok(())
@@ -870,11 +882,17 @@ fn rotation(field: &str, q: [f32; 4]) -> Result<(), SceneError> {
     if !q.iter().all(|x| x.is_finite()) {
         return invalid(field, "finite", format!("{q:?}"));
     }
-    let norm = Quat::from_array(q).length();
-    if !norm.is_normal() {
+    // Its length in f64: a quaternion with a component past 1e19 (whose square overflows
+    // f32) or below 1e-19 (whose square underflows) is still a rotation.
+    if !(norm64(q) > 0.0) {
         return invalid(field, "a non-zero quaternion", format!("{q:?}"));
     }
     Ok(())
+}
+
+/// The length of `q`, in f64.
+fn norm64(q: [f32; 4]) -> f64 {
+    q.iter().map(|&x| f64::from(x).powi(2)).sum::<f64>().sqrt()
 }
 
 /// The fuzz harness of `fuzz/`'s corpus regression test: `data` as a scene file in both

@@ -161,6 +161,15 @@ fn invalid_scenes_name_field_and_value() {
             "boards[0].shape.TriMesh.indices[0] must be a triangle of non-zero area, got [0, 1, 2]",
         ),
         (
+            // Past the supported range: its cross product would overflow to NaN.
+            "(boards: [(shape: TriMesh(vertices: [(-3e38, 0.0, 0.0), (3e38, 0.0, 0.0), (0.0, 0.0, 0.0)], indices: [(0, 1, 2)]))])",
+            "boards[0].shape.TriMesh.vertices[0] must be within 1e6 m of the origin in each coordinate, got [-3e38, 0.0, 0.0]",
+        ),
+        (
+            "(boards: [(shape: Compound([(shape: Plane(()), position: (0.0, 2e6, 0.0))]))])",
+            "boards[0].shape.Compound[0].position must be within 1e6 m of the origin in each coordinate, got [0.0, 2000000.0, 0.0]",
+        ),
+        (
             "(boards: [(shape: TriMesh(vertices: [], indices: []))])",
             "boards[0].shape.TriMesh.indices must be non-empty, got []",
         ),
@@ -196,6 +205,31 @@ fn invalid_scenes_name_field_and_value() {
     for (text, message) in cases {
         let err = Scene::from_ron_str(text).expect_err(text);
         assert_eq!(&err.to_string(), message, "for {text}");
+    }
+}
+
+/// A rotation is normalized on load however far from unit length it is given: components
+/// whose squares overflow or underflow f32 included.
+#[test]
+fn rotations_far_from_unit_length_load_normalized() {
+    for (q, want) in [
+        (
+            [1e20, 0.0, 0.0, 1.0],
+            glam::Quat::from_xyzw(1.0, 0.0, 0.0, 0.0),
+        ),
+        ([0.0, 0.0, 0.0, 1e-25], glam::Quat::IDENTITY),
+        (
+            [3e38, 0.0, 0.0, 3e38],
+            glam::Quat::from_xyzw(1.0, 0.0, 0.0, 1.0).normalize(),
+        ),
+    ] {
+        let text = format!(
+            "(boards: [(shape: Plane(()), rotation: ({:e}, {:e}, {:e}, {:e}))])",
+            q[0], q[1], q[2], q[3]
+        );
+        let scene = Scene::from_ron_str(&text).unwrap_or_else(|e| panic!("{text}: {e}"));
+        let got = bevy_marble::scene::quat(scene.boards[0].rotation);
+        assert!(got.abs_diff_eq(want, 1e-6), "{q:?}: {got}");
     }
 }
 
