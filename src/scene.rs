@@ -676,7 +676,8 @@ pub(crate) fn validate_shape(field: &str, shape: &ShapeDesc, top: bool) -> Resul
                     }
                 }
                 let [a, b, c] = tri.map(|ix| Vec3::from_array(vertices[ix as usize]));
-                if !((b - a).cross(c - a).length_squared() > 0.0) {
+                let area = (b - a).cross(c - a).length_squared();
+                if area.is_nan() || area <= 0.0 {
                     return invalid(
                         &format!("{field}.TriMesh.indices[{i}]"),
                         "a triangle of non-zero area",
@@ -884,7 +885,7 @@ fn rotation(field: &str, q: [f32; 4]) -> Result<(), SceneError> {
     }
     // Its length in f64: a quaternion with a component past 1e19 (whose square overflows
     // f32) or below 1e-19 (whose square underflows) is still a rotation.
-    if !(norm64(q) > 0.0) {
+    if norm64(q) <= 0.0 {
         return invalid(field, "a non-zero quaternion", format!("{q:?}"));
     }
     Ok(())
