@@ -822,3 +822,39 @@ fn a_sleeping_marble_spoiled_is_quarantined() {
         assert_eq!((r[0].entity, r[0].reason.component), (m, component));
     }
 }
+
+/// A marble, board or sensor made the child of another entity gets a logged warning that
+/// names it: the engine takes its `Transform` as its world pose (docs/bevy.md), so a
+/// child is stepped and shown elsewhere than a game may mean. A root entity gets none.
+#[cfg(feature = "bevy")]
+#[test]
+fn a_child_marble_board_or_sensor_is_warned_of() {
+    use bevy_ecs::hierarchy::ChildOf;
+    logged();
+    let (mut app, root_marble) = fixed_step_app();
+    let parent = app.world_mut().spawn_empty().id();
+    let child_marble = app
+        .world_mut()
+        .spawn((Marble, Position(Vec3::new(2.0, 1.0, 0.0)), ChildOf(parent)))
+        .id();
+    let child_sensor = app
+        .world_mut()
+        .spawn((Sensor, Collider::plane(), ChildOf(parent)))
+        .id();
+    // Made a child later: warned too.
+    let board = app.world_mut().spawn((Board, Collider::plane())).id();
+    app.update();
+    app.world_mut().entity_mut(board).insert(ChildOf(parent));
+    app.update();
+    let lines = logged();
+    let warned = |e: bevy_ecs::entity::Entity| {
+        lines
+            .iter()
+            .filter(|l| l.starts_with("WARN") && l.contains(&format!("{e} is a child")))
+            .count()
+    };
+    assert_eq!(warned(child_marble), 1, "{lines:?}");
+    assert_eq!(warned(child_sensor), 1, "{lines:?}");
+    assert_eq!(warned(board), 1, "{lines:?}");
+    assert_eq!(warned(root_marble), 0, "{lines:?}");
+}

@@ -3,6 +3,7 @@
 
 use bevy_app::{App, Plugin};
 use bevy_ecs::change_detection::Tick;
+use bevy_ecs::hierarchy::ChildOf;
 use bevy_ecs::intern::Interned;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
@@ -43,7 +44,9 @@ impl Plugin for MarbleTransformPlugin {
         app.add_systems(
             self.schedule,
             (
-                read_transforms.in_set(MarblePluginSystems::ReadTransforms),
+                (warn_children, read_transforms)
+                    .chain()
+                    .in_set(MarblePluginSystems::ReadTransforms),
                 sync_transforms.in_set(MarblePluginSystems::SyncTransforms),
             ),
         );
@@ -55,6 +58,29 @@ impl Plugin for MarbleTransformPlugin {
 #[derive(Resource, Default, Debug)]
 pub struct TransformWrites {
     pub(super) tick: Tick,
+}
+
+/// Logs a warning for each marble, board or sensor that became another entity's child
+/// since the last step: the engine reads and writes its `Transform` as its world pose, so
+/// a child is stepped where its local `Transform` puts it and shown offset by its parent
+/// (docs/bevy.md, "Spawning and teleports").
+#[allow(clippy::type_complexity)]
+pub fn warn_children(
+    children: Query<
+        Entity,
+        (
+            Or<(With<Marble>, With<Board>, With<Sensor>)>,
+            Or<(Changed<ChildOf>, Added<Marble>, Added<Board>, Added<Sensor>)>,
+            With<ChildOf>,
+        ),
+    >,
+) {
+    for entity in &children {
+        log::warn!(
+            "bevy_marble: {entity} is a child entity: its Transform is taken as its world \
+             pose (make it a root entity; a sensor that moves with a board is CarriedBy it)"
+        );
+    }
 }
 
 /// Marbles, boards and sensors spawned without a pose since the last step (a resource):
