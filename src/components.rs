@@ -197,6 +197,19 @@ pub struct NextPose {
     pub rotation: Quat,
 }
 
+impl NextPose {
+    /// The constant linear and angular velocity (world frame, about the board's position)
+    /// that take a board from `position` and `rotation` to this pose in `dt`, turning the
+    /// shorter way round.
+    pub fn motion(&self, position: Vec3, rotation: Quat, dt: f32) -> (Vec3, Vec3) {
+        let mut turn = self.rotation * rotation.conjugate();
+        if turn.w < 0.0 {
+            turn = -turn;
+        }
+        ((self.position - position) / dt, turn.to_scaled_axis() / dt)
+    }
+}
+
 /// The bits of the "not given" value of [`Position::UNSET`] and [`Rotation::UNSET`]: a
 /// quiet NaN with a payload no arithmetic produces, so a NaN from a program is never
 /// taken for it.

@@ -322,7 +322,8 @@ impl<'a> MarbleValues<'a> {
 /// A board's [`NextPose`](crate::components::NextPose), for a board at `position` and
 /// `rotation` and a step of `dt`: within the range of a position, a rotation finite and of
 /// non-zero length, and reached within the step at a velocity and spin a board may have
-/// (what `drive_boards` gives it); the first bad value, if any, as `NextPose`'s.
+/// (those `drive_boards` gives it: [`NextPose::motion`](crate::components::NextPose::motion));
+/// the first bad value, if any, as `NextPose`'s.
 pub(crate) fn check_next_pose(
     next: &crate::components::NextPose,
     (position, rotation): (Vec3, Quat),
@@ -337,7 +338,7 @@ pub(crate) fn check_next_pose(
             next.rotation,
         ));
     }
-    let velocity = (next.position - position) / dt;
+    let (velocity, spin) = next.motion(position, rotation, dt);
     if !velocity.is_finite() || velocity.abs().max_element() > MAX_SPEED {
         return Err(invalid(
             COMPONENT,
@@ -345,11 +346,6 @@ pub(crate) fn check_next_pose(
             next.position,
         ));
     }
-    let mut turn = next.rotation.normalize() * rotation.conjugate();
-    if turn.w < 0.0 {
-        turn = -turn;
-    }
-    let spin = turn.to_scaled_axis() / dt;
     if !spin.is_finite() || spin.abs().max_element() > MAX_BOARD_SPIN {
         return Err(invalid(
             COMPONENT,

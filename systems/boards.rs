@@ -153,13 +153,7 @@ pub fn drive_boards(
 ) {
     let dt = config.dt;
     for (position, rotation, next, mut velocity, mut angular) in &mut boards {
-        velocity.0 = (next.position - position.0) / dt;
-        // The turn from here to there, the shorter way round, world frame.
-        let mut turn = next.rotation * rotation.0.conjugate();
-        if turn.w < 0.0 {
-            turn = -turn;
-        }
-        angular.0 = turn.to_scaled_axis() / dt;
+        (velocity.0, angular.0) = next.motion(position.0, rotation.0, dt);
     }
 }
 

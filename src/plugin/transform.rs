@@ -152,20 +152,10 @@ pub fn read_transforms(
             continue;
         }
         let (translation, turn) = s.read.unwrap_or((Vec3::ZERO, Quat::IDENTITY));
-        if s.position_unset && position.0 == translation {
-            position.0 = transform.translation;
-        }
-        let mut r = None;
-        if let Some(mut rotation) = rotation {
-            if s.rotation_unset && rotation.0 == turn {
-                rotation.0 = transform.rotation;
-            }
-            r = Some(rotation.0);
-        }
-        if let Some(mut poses) = poses {
-            poses.reset(position.0, r.unwrap_or(transform.rotation));
-            poses.saw(&transform);
-        }
+        let take = (s.position_unset && position.0 == translation, |r: Quat| {
+            s.rotation_unset && r == turn
+        });
+        take_pose(&transform, &mut position, rotation, poses, take);
     }
     for (transform, mut position, rotation, marble, poses) in &mut entities {
         // Spawned with it (the spawn hook read it), or written by the engine: by the
@@ -179,20 +169,36 @@ pub fn read_transforms(
         if transform.is_added() || !by_program {
             continue;
         }
+        // A marble's orientation is only its spin's bookkeeping (written only when it
+        // differs); a board's and a sensor's is their pose.
+        let take = (true, |r: Quat| !marble || r != transform.rotation);
+        take_pose(&transform, &mut position, rotation, poses, take);
+    }
+}
+
+/// Moves an entity to its `Transform`: its position where `take.0`, its rotation where
+/// `take.1` holds of its rotation; an interpolated one starts its poses there afresh, the
+/// `Transform` taken.
+fn take_pose(
+    transform: &Ref<Transform>,
+    position: &mut Mut<Position>,
+    rotation: Option<Mut<Rotation>>,
+    poses: Option<Mut<PhysicsPoses>>,
+    take: (bool, impl Fn(Quat) -> bool),
+) {
+    if take.0 {
         position.0 = transform.translation;
-        let mut r = None;
-        if let Some(mut rotation) = rotation {
-            // A marble's orientation is only its spin's bookkeeping; a board's and a
-            // sensor's is their pose.
-            if !marble || rotation.0 != transform.rotation {
-                rotation.0 = transform.rotation;
-            }
-            r = Some(rotation.0);
+    }
+    let mut r = None;
+    if let Some(mut rotation) = rotation {
+        if take.1(rotation.0) {
+            rotation.0 = transform.rotation;
         }
-        if let Some(mut poses) = poses {
-            poses.reset(position.0, r.unwrap_or(transform.rotation));
-            poses.saw(&transform);
-        }
+        r = Some(rotation.0);
+    }
+    if let Some(mut poses) = poses {
+        poses.reset(position.0, r.unwrap_or(transform.rotation));
+        poses.saw(transform);
     }
 }
 
