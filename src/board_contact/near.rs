@@ -181,7 +181,7 @@ impl NearPieces {
             return None;
         }
         let touch = if !moving && self.holds_still_face(b) {
-            self.face_touch(b, id, x, r, tol, material)?
+            self.face_touch(b, id, x, r, (tol, false), material)?
         } else {
             // As `gather` computes it (at the board's pose at the start, bit for bit).
             let (c, q) = b.pose_at(0.0);
@@ -218,7 +218,7 @@ impl NearPieces {
             // other board); the event loop does the rest.
             return Some(touch);
         }
-        self.vouches(boards, &touch, x, v, a, h, r, tol, spins)
+        self.vouches(boards, &touch, x, v, a, h, r, (tol, false), spins)
             .then_some(touch)
     }
 
@@ -254,11 +254,34 @@ impl NearPieces {
         if b.is_moving() || !self.holds_still_face(b) {
             return None;
         }
-        let touch = self.face_touch(b, id, x, r, tol, material)?;
+        // Most substeps the marble is well inside the list's reach: a test without square
+        // roots shows that, and both reach tests below are then passed (they answer as
+        // they would: the test implies theirs).
+        let inside = self.well_inside(x, v, a, h, tol);
+        let touch = self.face_touch(b, id, x, r, (tol, inside), material)?;
         // `vouches` asks more of the list than `is_fresh` does (the substep's whole
         // spread, not its speed alone).
-        self.vouches(boards, &touch, x, v, a, h, r, tol, false)
+        self.vouches(boards, &touch, x, v, a, h, r, (tol, inside), false)
             .then_some(touch)
+    }
+
+    /// A sufficient condition, without square roots, for [`NearPieces::vouches`]'s reach
+    /// test on the list's flat face (a marble that does not spin, the board where it was):
+    /// `|x − anchor| + spread + tol < reach`, with `spread = (|v| + 2|a_t| h) h` and `a_t`
+    /// the acceleration the face leaves. As `p + q ≤ √(2(p² + q²))` twice, it holds when
+    /// `2(|x − anchor|² + 2h²(|v|² + 4h²|a_t|²)) < (reach − tol)²`; the factor
+    /// `1 ± 1e-4` covers every rounding of both sides (each a few parts in 1e7), so where
+    /// this is true the exact test is too. False near the edge of the reach, and for NaN:
+    /// the exact test decides there.
+    #[inline(always)]
+    fn well_inside(&self, x: Vec3, v: Vec3, a: Vec3, h: f32, tol: f32) -> bool {
+        let n = self.face_normal;
+        let along = a - a.dot(n).min(0.0) * n;
+        let d = x - self.anchor_world;
+        let hh = h * h;
+        let spread = 2.0 * hh * (v.length_squared() + 4.0 * hh * along.length_squared());
+        let room = self.reach - tol;
+        room > 0.0 && 2.0 * (d.length_squared() + spread) * 1.0001 < room * room * 0.9999
     }
 
     /// True when the list holds a flat face of board `b` (which does not move), and the
@@ -270,7 +293,8 @@ impl NearPieces {
 
     /// The touch of the list's flat face `id` of board `b` ([`NearPieces::holds_still_face`])
     /// for a marble of radius `r` at `x`: the distance is affine in the centre. `None`
-    /// when the list does not cover `x` or the face is farther than `tol`.
+    /// when the list does not cover `x` (known to, with `inside`) or the face is farther
+    /// than `tol`.
     #[inline(always)]
     fn face_touch(
         &self,
@@ -278,11 +302,11 @@ impl NearPieces {
         id: PieceId,
         x: Vec3,
         r: f32,
-        tol: f32,
+        (tol, inside): (f32, bool),
         material: &Material,
     ) -> Option<Touch> {
         let d = x - self.anchor_world;
-        if d.length() + tol >= self.reach {
+        if !inside && d.length() + tol >= self.reach {
             return None;
         }
         let n = self.face_normal;
@@ -308,7 +332,8 @@ impl NearPieces {
     /// `r` at `x` (world) moving at `v` under acceleration `a` (and friction, when it
     /// `spins`): the list covers every centre it can reach sliding on the piece (its
     /// speed, and the acceleration the piece leaves it, over `h`), and no other board
-    /// comes within reach.
+    /// comes within reach. `inside`: the reach test is known to pass
+    /// ([`NearPieces::well_inside`]).
     #[expect(
         clippy::too_many_arguments,
         reason = "a hot kernel taking plain values"
@@ -323,11 +348,15 @@ impl NearPieces {
         a: Vec3,
         h: f32,
         r: f32,
-        tol: f32,
+        (tol, inside): (f32, bool),
         spins: bool,
     ) -> bool {
         let bi = self.board as usize;
         let b = &boards[bi];
+        // Shown well inside the reach ([`NearPieces::well_inside`]), with no other board.
+        if inside && boards.len() == 1 {
+            return true;
+        }
         // Where the marble can go: at most its speed, and the acceleration the piece
         // leaves it (none into the piece; friction adds at most μ times the normal force
         // for a marble that spins), over the substep; the list and the other boards must
@@ -341,7 +370,9 @@ impl NearPieces {
             0.0
         };
         let spread = (v.length() + 2.0 * (along.length() + grip) * h) * h;
-        let clear = if b.pose_version == self.pose_version {
+        let clear = if inside {
+            true
+        } else if b.pose_version == self.pose_version {
             (x - self.anchor_world).length() + spread + tol < self.reach
         } else {
             self.covers(b.rotation.conjugate() * (x - b.position), spread, tol)
@@ -644,5 +675,112 @@ impl Candidates {
             .iter()
             .map(|c| c.2)
             .fold(f32::INFINITY, f32::min)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// `vouches`'s reach test on a still face, as it computes it.
+    fn exact(list: &NearPieces, x: Vec3, v: Vec3, a: Vec3, h: f32, tol: f32) -> bool {
+        let n = list.face_normal;
+        let along = a - a.dot(n).min(0.0) * n;
+        let spread = (v.length() + 2.0 * along.length() * h) * h;
+        (x - list.anchor_world).length() + spread + tol < list.reach
+    }
+
+    fn unit(u: [f32; 3]) -> Vec3 {
+        Vec3::from_array(u).try_normalize().unwrap_or(Vec3::Y)
+    }
+
+    /// A still-face list and a marble whose reach test is within `closeness` of the edge
+    /// of the square-root-free test, where that test is tightest: the marble's distance
+    /// from the anchor equal to its spread (`p + q = √(2(p² + q²))` for `p = q`) and its
+    /// speed twice its acceleration's share (`2|a_t|h`) of the spread.
+    fn tight_case(
+        (normal, anchor, reach, tol): ([f32; 3], [f32; 3], f32, f32),
+        (h, into, dirs): (f32, f32, [[f32; 3]; 3]),
+        (share, ratio, closeness): (f32, f32, f32),
+    ) -> (NearPieces, Vec3, Vec3, Vec3) {
+        let n = unit(normal);
+        let list = NearPieces {
+            face_normal: n,
+            anchor_world: Vec3::from_array(anchor),
+            reach,
+            ..NearPieces::default()
+        };
+        let room = reach - tol;
+        // `spread = (|v| + 2|a_t|h)h` with `|v| = share·2|a_t|h`, the distance `ratio`
+        // times the spread, both sized so that `2(d² + s²) = closeness · room²`.
+        let spread = room * (closeness / (2.0 * (1.0 + ratio * ratio))).sqrt();
+        let along_len = spread / (2.0 * h * h * (1.0 + share));
+        let t = unit(dirs[0]);
+        let along = (t - t.dot(n) * n)
+            .try_normalize()
+            .unwrap_or(n.any_orthonormal_vector());
+        let a = along * along_len + into * n;
+        let v = unit(dirs[1]) * (share * 2.0 * along_len * h);
+        let x = list.anchor_world + unit(dirs[2]) * (ratio * spread);
+        (list, x, v, a)
+    }
+
+    fn case() -> impl Strategy<Value = (NearPieces, Vec3, Vec3, Vec3, f32, f32)> {
+        let v3 = || prop::array::uniform3(-1.0f32..1.0);
+        let list = (
+            v3(),
+            prop::array::uniform3(-1e3f32..1e3),
+            1e-3f32..2.0,
+            0.0f32..0.01,
+        );
+        let motion = (1e-4f32..0.1, -20.0f32..0.0, prop::array::uniform3(v3()));
+        let shape = prop_oneof![
+            (0.0f32..2.0, 0.0f32..2.0, 0.9995f32..1.0005),
+            // Near the bound's tightest point, and within rounding of its edge.
+            (0.999f32..1.001, 0.999f32..1.001, 0.999_999f32..1.000_001),
+        ];
+        (list, motion, shape).prop_map(|(list, motion, shape)| {
+            let (h, tol) = (motion.0, list.3 * list.2);
+            let (near, x, v, a) = tight_case((list.0, list.1, list.2, tol), motion, shape);
+            (near, x, v, a, h, tol)
+        })
+    }
+
+    proptest! {
+        /// Where the square-root-free test passes, the exact reach test it stands in for
+        /// passes too, at the edge of the former and where its bound is tightest.
+        #[test]
+        fn well_inside_implies_the_exact_reach_test((list, x, v, a, h, tol) in case()) {
+            if list.well_inside(x, v, a, h, tol) {
+                prop_assert!(exact(&list, x, v, a, h, tol));
+            }
+        }
+    }
+
+    /// The test is not vacuous, and where its bound is tightest it is as tight as the
+    /// exact test: a marble a little inside its edge passes both, one a little outside
+    /// neither.
+    #[test]
+    fn well_inside_passes_inside_its_edge_only() {
+        let shape = |closeness| {
+            let list = ([0.3, 1.0, 0.1], [12.0, 0.5, -3.0], 0.2, 2e-6);
+            tight_case(
+                list,
+                (
+                    1.0 / 240.0,
+                    -9.0,
+                    [[1.0, 0.0, 0.2], [0.5, 0.1, 1.0], [0.0, 0.3, 1.0]],
+                ),
+                (1.0, 1.0, closeness),
+            )
+        };
+        let (h, tol) = (1.0 / 240.0, 2e-6);
+        let (list, x, v, a) = shape(0.999);
+        assert!(list.well_inside(x, v, a, h, tol));
+        assert!(exact(&list, x, v, a, h, tol));
+        let (list, x, v, a) = shape(1.001);
+        assert!(!list.well_inside(x, v, a, h, tol));
+        assert!(!exact(&list, x, v, a, h, tol));
     }
 }
