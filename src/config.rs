@@ -253,7 +253,9 @@ pub struct StepConfig {
     pub sleep: Option<Sleep>,
     /// Record impacts and contacts that start and end as messages and observer events
     /// ([`crate::events`]). Default `false` in a [`crate::Simulation`], `true` with the
-    /// Bevy plugin; off, no code runs for them. Sensors report whenever there are any.
+    /// Bevy plugin, whose `MarbleEventsPlugin` records them whatever this says (a
+    /// `StepConfig` the game inserts later keeps them); off, no code runs for them.
+    /// Sensors report whenever there are any.
     pub events: bool,
 }
 

@@ -18,7 +18,8 @@
 //!   [`Sensor`](crate::components::Sensor) volume, and the step it leaves.
 //!
 //! Impacts and contacts are recorded only with [`StepConfig::events`] on (the Bevy plugin
-//! turns it on; [`Simulation`](crate::Simulation) leaves it off unless asked); sensors are
+//! records them whatever it says, a `StepConfig` inserted later included;
+//! [`Simulation`](crate::Simulation) leaves it off unless asked); sensors are
 //! checked whenever there are any. In a [`Simulation`](crate::Simulation) the messages of a
 //! step stay readable until the end of the next step.
 //!

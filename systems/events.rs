@@ -43,15 +43,26 @@ pub fn find_observers(world: &mut World) {
     }
 }
 
-/// Run condition: impacts and contacts are recorded ([`StepConfig::events`]).
-pub fn events_on(config: Res<StepConfig>) -> bool {
-    config.events
+/// Run condition: impacts and contacts are recorded ([`StepConfig::events`], or
+/// [`RecordEvents`] present).
+pub fn events_on(config: Res<StepConfig>, plugin: Option<Res<RecordEvents>>) -> bool {
+    config.events || plugin.is_some()
 }
 
 /// Run condition: events are recorded or there are sensors.
-pub fn watching(config: Res<StepConfig>, sensors: Query<(), With<Sensor>>) -> bool {
-    config.events || !sensors.is_empty()
+pub fn watching(
+    config: Res<StepConfig>,
+    plugin: Option<Res<RecordEvents>>,
+    sensors: Query<(), With<Sensor>>,
+) -> bool {
+    config.events || plugin.is_some() || !sensors.is_empty()
 }
+
+/// Present in an app with the Bevy plugin's `MarbleEventsPlugin` (a resource): impacts and contacts are recorded whatever [`StepConfig::events`] says,
+/// so that a `StepConfig` the game inserts or builds afresh later (whose default leaves
+/// them off) keeps them.
+#[derive(Resource, Default, Debug)]
+pub struct RecordEvents;
 
 /// Run condition: there are sensors, or marbles were inside one at the last step (the
 /// last sensor despawned, or its `Sensor` removed: they leave it).

@@ -1119,3 +1119,44 @@ fn an_interpolated_marble_without_a_transform_keeps_its_poses() {
     let dx = (poses.current.0 - to - Vec3::new(DT as f32, 0.0, 0.0)).length();
     assert!(dx <= 1e-6, "{:?}", poses.current);
 }
+
+/// A `StepConfig` the game inserts after adding the plugin, built from its default (which
+/// records no events), keeps impacts and contacts recorded: the first impact of a drop
+/// comes at the free-fall speed `√(2gh)` and starts the contact with the floor.
+#[test]
+fn a_step_config_inserted_later_keeps_the_events() {
+    let mut app = recording_app(DT);
+    app.insert_resource(StepConfig {
+        integrator: Integrator::VelocityVerlet,
+        ..StepConfig::default()
+    });
+    let (h, r) = (0.2f32, 0.008f32);
+    let floor = floor(&mut app, 0.5);
+    let marble = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Restitution(0.5),
+            Transform::from_xyz(0.0, h + r, 0.0),
+        ))
+        .id();
+    for _ in 0..64 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    let first = seen.impacts.first().expect("the drop's impact is reported");
+    let want = (2.0 * G * h).sqrt();
+    assert!(
+        ((first.speed - want) / want).abs() <= 1e-4,
+        "{} m/s, want {want}",
+        first.speed
+    );
+    assert_eq!((first.marble, first.other), (marble, floor));
+    assert_eq!(
+        seen.started.first(),
+        Some(&ContactStarted {
+            marble,
+            other: floor
+        })
+    );
+}

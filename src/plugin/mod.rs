@@ -227,7 +227,9 @@ pub fn stepped(clock: Option<Res<PhysicsClock>>) -> bool {
 }
 
 /// Impacts and contacts as messages and observer events ([`crate::events`]): turns
-/// [`StepConfig::events`] on. (The step plugin registers every message, kept until
+/// [`StepConfig::events`] on, and records them whatever it says from then on (a
+/// `StepConfig` inserted later, `..default()` included, keeps them; leave this plugin out
+/// of the group to record none). (The step plugin registers every message, kept until
 /// `Update` has read it however many fixed steps a frame runs, and sensors report without
 /// this plugin.)
 pub struct MarbleEventsPlugin;
@@ -236,5 +238,6 @@ impl Plugin for MarbleEventsPlugin {
     fn build(&self, app: &mut App) {
         init_resources(app.world_mut());
         app.world_mut().resource_mut::<StepConfig>().events = true;
+        app.init_resource::<crate::systems::events::RecordEvents>();
     }
 }
