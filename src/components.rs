@@ -55,8 +55,9 @@ vec3_newtype!(
 );
 vec3_newtype!(
     /// Force on a marble, newtons, accumulated by user systems before the physics step and
-    /// cleared after the step (all substeps) has integrated it. Gravity is not stored
-    /// here: it comes from [`crate::config::StepConfig::gravity`].
+    /// cleared after the step (all substeps) has integrated it (in an app, also at each
+    /// fixed step the paused physics does not take). Gravity is not stored here: it comes
+    /// from [`crate::config::StepConfig::gravity`].
     Force
 );
 vec3_newtype!(

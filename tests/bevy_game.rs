@@ -1160,3 +1160,29 @@ fn a_step_config_inserted_later_keeps_the_events() {
         })
     );
 }
+
+/// A force the game adds every fixed step (a wind) is not saved up while the physics is
+/// paused: the first step after 32 paused ones gives the velocity of one step's force,
+/// `F/m · dt` (no gravity), not of 33.
+#[test]
+fn a_force_added_while_paused_is_not_saved_up() {
+    let mut app = app(DT);
+    app.world_mut().resource_mut::<StepConfig>().gravity = Vec3::ZERO;
+    let (f, m) = (0.01f32, 0.02f32);
+    let marble = app.world_mut().spawn((Marble, Mass::new(m))).id();
+    app.add_systems(FixedUpdate, move |mut forces: Query<&mut Force>| {
+        for mut force in &mut forces {
+            force.0 += Vec3::X * f;
+        }
+    });
+    app.world_mut().resource_mut::<PhysicsClock>().paused = true;
+    for _ in 0..32 {
+        app.update();
+    }
+    assert_eq!(app.world().get::<Velocity>(marble).unwrap().0, Vec3::ZERO);
+    app.world_mut().resource_mut::<PhysicsClock>().paused = false;
+    app.update();
+    let v = app.world().get::<Velocity>(marble).unwrap().0;
+    let want = f / m * DT as f32;
+    assert!(((v.x - want) / want).abs() <= 1e-6, "v = {v}, want {want}");
+}

@@ -18,7 +18,9 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
 use bevy_reflect::Reflect;
 use bevy_time::{Fixed, Time};
+use glam::Vec3;
 
+use crate::components::{Force, Marble, Quarantined};
 use crate::config::StepConfig;
 use crate::schedule::{MarbleSubstep, init_resources, run_step, substep_schedule};
 
@@ -191,17 +193,17 @@ impl Plugin for MarbleStepPlugin {
 }
 
 /// Advances the physics by the fixed timestep times [`PhysicsClock::speed`], unless
-/// [`PhysicsClock::paused`].
+/// [`PhysicsClock::paused`]. A fixed step the physics does not take clears the marbles'
+/// [`Force`] as a step would: what the game's systems add while it is paused is not
+/// saved up for the first step after.
 pub fn physics_step(world: &mut World) {
     let clock = world
         .get_resource::<PhysicsClock>()
         .copied()
         .unwrap_or_default();
-    if clock.paused || !(clock.speed > 0.0 && clock.speed.is_finite()) {
-        return;
-    }
     let dt = world.resource::<Time<Fixed>>().timestep().as_secs_f32() * clock.speed;
-    if dt <= 0.0 {
+    if clock.paused || !(clock.speed > 0.0 && clock.speed.is_finite()) || dt <= 0.0 {
+        drop_forces(world);
         return;
     }
     world.resource_mut::<StepConfig>().dt = dt;
@@ -210,6 +212,18 @@ pub fn physics_step(world: &mut World) {
     let seconds = start.elapsed().as_secs_f64();
     if let Some(mut last) = world.get_resource_mut::<LastStep>() {
         last.seconds = seconds;
+    }
+}
+
+/// Clears every marble's [`Force`], but a quarantined one's (as
+/// [`clear_forces`](crate::systems::forces::clear_forces) does after a step), writing
+/// only those not zero.
+fn drop_forces(world: &mut World) {
+    let mut forces = world.query_filtered::<&mut Force, (With<Marble>, Without<Quarantined>)>();
+    for mut force in forces.iter_mut(world) {
+        if force.0 != Vec3::ZERO {
+            force.0 = Vec3::ZERO;
+        }
     }
 }
 
