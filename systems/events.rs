@@ -2,6 +2,7 @@
 //! `Events`), contacts that started or ended and sensors entered or left at the step's end
 //! (stage `Report`).
 
+use bevy_ecs::entity::Entities;
 use bevy_ecs::prelude::*;
 use glam::Vec3;
 use parry3d::bounding_volume::Aabb;
@@ -133,13 +134,15 @@ pub fn record_touches(
 }
 
 /// Last substep: the pairs touching during this step against those of the last step; a
-/// pair with a sleeping marble keeps touching.
+/// pair with a sleeping marble keeps touching. A pair whose marble or board is gone by now
+/// (despawned during the step, by an observer of its impact) does not start touching.
 pub fn finish_touches(
     mut commands: Commands,
     mut state: ResMut<EventState>,
     mut started: ResMut<Messages<ContactStarted>>,
     mut ended: ResMut<Messages<ContactEnded>>,
     asleep: Query<(), (With<Marble>, With<Sleeping>, Without<Quarantined>)>,
+    entities: &Entities,
 ) {
     let state = state.as_mut();
     // A step that touched what the last one did, in the same order (a pile at rest), has
@@ -160,6 +163,9 @@ pub fn finish_touches(
     }
     state.touching.sort_unstable();
     state.touching.dedup();
+    state
+        .touching
+        .retain(|&(m, o)| entities.contains_spawned(m) && entities.contains_spawned(o));
     let on_start = state.observed & Observed::STARTED != 0;
     let on_end = state.observed & Observed::ENDED != 0;
     diff(&state.touched, &state.touching, |&(marble, other), now| {

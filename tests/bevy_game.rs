@@ -1186,3 +1186,43 @@ fn a_force_added_while_paused_is_not_saved_up() {
     let want = f / m * DT as f32;
     assert!(((v.x - want) / want).abs() <= 1e-6, "v = {v}, want {want}");
 }
+
+/// A board that an observer of its first impact despawns (breaking glass) starts no
+/// contact: the impact is reported, then no `ContactStarted` or `ContactEnded` names the
+/// gone board, and the marble falls on.
+#[test]
+fn a_board_despawned_by_an_impact_observer_starts_no_contact() {
+    let mut app = recording_app(DT);
+    let glass = floor(&mut app, 0.5);
+    app.world_mut().spawn((
+        Board,
+        Collider::plane(),
+        Position(Vec3::new(0.0, -1.0, 0.0)),
+    ));
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Transform::from_xyz(0.0, 0.1, 0.0)))
+        .id();
+    app.add_observer(move |impact: On<MarbleImpact>, mut commands: Commands| {
+        if impact.other == glass {
+            commands.entity(glass).despawn();
+        }
+    });
+    for _ in 0..32 {
+        app.update();
+    }
+    let seen = app.world().resource::<Seen>();
+    assert_eq!(seen.impacts.first().map(|i| i.other), Some(glass));
+    assert!(
+        seen.started.iter().all(|c| c.other != glass),
+        "{:?}",
+        seen.started
+    );
+    assert!(
+        seen.ended.iter().all(|c| c.other != glass),
+        "{:?}",
+        seen.ended
+    );
+    assert!(app.world().get_entity(glass).is_err());
+    assert!(app.world().get::<Position>(marble).unwrap().y < 0.0);
+}
