@@ -1226,3 +1226,41 @@ fn a_board_despawned_by_an_impact_observer_starts_no_contact() {
     assert!(app.world().get_entity(glass).is_err());
     assert!(app.world().get::<Position>(marble).unwrap().y < 0.0);
 }
+
+/// A game that spins an interpolated marble's mesh (its `Transform`'s rotation, every
+/// frame; the marble carries no `Rotation`) moves nothing: the marble flies its free path
+/// (Verlet: exact), and its `Transform` stays eased between its last two physics poses.
+#[test]
+fn spinning_an_interpolated_marbles_mesh_moves_nothing() {
+    let mut app = app(1.0 / 144.0);
+    let v = Vec3::new(1.0, 2.0, 0.0);
+    let marble = app
+        .world_mut()
+        .spawn((
+            Marble,
+            TransformInterpolation,
+            Transform::from_xyz(0.0, 10.0, 0.0),
+            Velocity(v),
+        ))
+        .id();
+    app.add_systems(Update, |mut q: Query<&mut Transform, With<Marble>>| {
+        for mut transform in &mut q {
+            transform.rotate_y(0.1);
+        }
+    });
+    for _ in 0..100 {
+        app.update();
+    }
+    let steps = app.world().resource::<Time<Fixed>>().elapsed_secs_f64() / DT;
+    let t = (steps.round() * DT) as f32;
+    let want = Vec3::new(0.0, 10.0, 0.0) + v * t - 0.5 * G * t * t * Vec3::Y;
+    let at = app.world().get::<Position>(marble).unwrap().0;
+    assert!((at - want).length() <= 1e-4, "at {at}, want {want}");
+    // Eased: within the last step's move behind the physics pose.
+    let shown = app.world().get::<Transform>(marble).unwrap().translation;
+    let speed = app.world().get::<Velocity>(marble).unwrap().0.length() + G * DT as f32;
+    assert!(
+        (shown - at).length() <= speed * DT as f32,
+        "shown at {shown}, at {at}"
+    );
+}

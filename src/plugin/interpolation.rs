@@ -58,9 +58,12 @@ impl PhysicsPoses {
     }
 
     /// Whether `transform` differs from what the easing last wrote: the program set it.
-    pub(super) fn set_by_program(&self, transform: &Transform) -> bool {
-        self.written
-            .is_some_and(|w| w != (transform.translation, transform.rotation))
+    /// `turned`: whether its rotation counts (not for a marble without a `Rotation`, whose
+    /// `Transform` rotation the easing leaves to the game: a spinning mesh).
+    pub(super) fn set_by_program(&self, transform: &Transform, turned: bool) -> bool {
+        self.written.is_some_and(|(translation, rotation)| {
+            translation != transform.translation || (turned && rotation != transform.rotation)
+        })
     }
 
     /// The pose a fraction `t` of the way from the previous to the current one.
@@ -183,13 +186,19 @@ pub fn hold_poses(mut entities: Query<&mut PhysicsPoses, With<TransformInterpola
 pub fn ease_transforms(
     fixed: Res<Time<Fixed>>,
     mut entities: Query<
-        (&mut PhysicsPoses, Option<&Rotation>, &mut Transform),
+        (
+            &mut PhysicsPoses,
+            Option<&Rotation>,
+            Has<Marble>,
+            &mut Transform,
+        ),
         With<TransformInterpolation>,
     >,
 ) {
     let t = fixed.overstep_fraction();
-    for (mut poses, rotation, mut transform) in &mut entities {
-        if !poses.initialised || poses.set_by_program(&transform) {
+    for (mut poses, rotation, marble, mut transform) in &mut entities {
+        let turned = !marble || rotation.is_some();
+        if !poses.initialised || poses.set_by_program(&transform, turned) {
             continue;
         }
         let (translation, r) = poses.at(t);

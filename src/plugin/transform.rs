@@ -161,7 +161,8 @@ pub fn read_transforms(
         // Spawned with it (the spawn hook read it), or written by the engine: by the
         // easing for an interpolated entity, else by the last step's write-back.
         let by_program = match &poses {
-            Some(poses) => poses.set_by_program(&transform),
+            // (A marble without a `Rotation`: only its translation counts.)
+            Some(poses) => poses.set_by_program(&transform, !marble || rotation.is_some()),
             None => transform
                 .last_changed()
                 .is_newer_than(writes.tick, ticks.this_run()),
