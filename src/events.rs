@@ -99,6 +99,12 @@ pub struct EventState {
     /// The last step's `touching` as it was recorded, before the sleeping marbles' pairs
     /// were added and it was sorted.
     pub(crate) touched_raw: Vec<(Entity, Entity)>,
+    /// How many marbles slept when `touched` was made, and [`SleepState`]'s count of steps
+    /// that put marbles to sleep then: the pairs it keeps for sleepers stand while neither
+    /// changes (none fell asleep, so as many means none woke or went).
+    ///
+    /// [`SleepState`]: crate::sleep::SleepState
+    pub(crate) sleepers: (usize, u32),
     /// `(sensor, marble)` pairs inside, at this step and the last (sorted, unique).
     pub(crate) inside: Vec<(Entity, Entity)>,
     pub(crate) was_inside: Vec<(Entity, Entity)>,

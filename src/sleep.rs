@@ -147,6 +147,8 @@ pub struct SleepState {
     ///
     /// [`run_step`]: crate::schedule::run_step
     pub(crate) idle: bool,
+    /// How many times a step has put marbles to sleep (wrapping).
+    pub(crate) naps: u32,
 }
 
 impl SleepState {

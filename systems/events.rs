@@ -18,7 +18,7 @@ use crate::events::{
     SensorTrack, SensorVolume, emit,
 };
 use crate::pairs::MarbleContacts;
-use crate::sleep::Sleeping;
+use crate::sleep::{SleepState, Sleeping};
 
 /// First substep of each step (stage `Events`): notes which of the engine's events have
 /// observers, so that only those are triggered.
@@ -134,23 +134,30 @@ pub fn record_touches(
 }
 
 /// Last substep: the pairs touching during this step against those of the last step; a
-/// pair with a sleeping marble keeps touching. A pair whose marble or board is gone by now
-/// (despawned during the step, by an observer of its impact) does not start touching.
+/// pair with a sleeping marble keeps touching while it sleeps. A pair whose marble or
+/// board is gone by now (despawned during the step, by an observer of its impact) does not
+/// start touching.
+#[allow(clippy::type_complexity)]
 pub fn finish_touches(
     mut commands: Commands,
     mut state: ResMut<EventState>,
     mut started: ResMut<Messages<ContactStarted>>,
     mut ended: ResMut<Messages<ContactEnded>>,
-    asleep: Query<(), (With<Marble>, With<Sleeping>, Without<Quarantined>)>,
+    (asleep, sleep): (
+        Query<(), (With<Marble>, With<Sleeping>, Without<Quarantined>)>,
+        Res<SleepState>,
+    ),
     entities: &Entities,
 ) {
     let state = state.as_mut();
-    // A step that touched what the last one did, in the same order (a pile at rest), has
-    // nothing to report and needs no sorting.
-    if state.touching == state.touched_raw {
+    // A step that touched what the last one did, in the same order (a pile at rest), with
+    // the same marbles asleep, has nothing to report and needs no sorting.
+    let sleepers = (asleep.iter().len(), sleep.naps);
+    if state.touching == state.touched_raw && sleepers == state.sleepers {
         state.touching.clear();
         return;
     }
+    state.sleepers = sleepers;
     std::mem::swap(&mut state.touched_raw, &mut state.touching);
     state.touching.clear();
     state.touching.extend_from_slice(&state.touched_raw);

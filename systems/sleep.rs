@@ -450,6 +450,9 @@ pub fn fall_asleep(
             radius: radius.0,
         });
     }
+    if !state.keys.is_empty() {
+        state.naps = state.naps.wrapping_add(1);
+    }
     // Their contact impulses, for warm starting them when they wake.
     state.keys.sort_unstable();
     solver.stow_impulses(&state.keys, &mut state.impulses);

@@ -1264,3 +1264,46 @@ fn spinning_an_interpolated_marbles_mesh_moves_nothing() {
         "shown at {shown}, at {at}"
     );
 }
+
+/// With sleeping on, a marble asleep on the floor that the game lifts into the air ends
+/// its contact with the floor, and starts it again when it lands (inelastic: once).
+#[test]
+fn a_sleeping_marble_lifted_off_the_floor_ends_and_restarts_its_contact() {
+    let mut app = recording_app(DT);
+    app.world_mut().resource_mut::<StepConfig>().sleep = Some(Sleep {
+        speed: 0.01,
+        time: 0.2,
+    });
+    let floor = floor(&mut app, 0.0);
+    let r = 0.008;
+    let marble = app
+        .world_mut()
+        .spawn((Marble, Restitution(0.0), Transform::from_xyz(0.0, r, 0.0)))
+        .id();
+    for _ in 0..64 {
+        app.update();
+    }
+    assert!(app.world().get::<Sleeping>(marble).is_some(), "asleep");
+    let contact = ContactStarted {
+        marble,
+        other: floor,
+    };
+    assert_eq!(app.world().resource::<Seen>().started, vec![contact]);
+    app.world_mut().get_mut::<Position>(marble).unwrap().0 = Vec3::new(0.0, 0.5, 0.0);
+    for _ in 0..4 {
+        app.update();
+    }
+    let ended = ContactEnded {
+        marble,
+        other: floor,
+    };
+    assert_eq!(app.world().resource::<Seen>().ended, vec![ended], "lifted");
+    for _ in 0..64 {
+        app.update();
+    }
+    assert_eq!(
+        app.world().resource::<Seen>().started,
+        vec![contact, contact],
+        "landed"
+    );
+}
