@@ -67,6 +67,19 @@ use crate::pairs::{Grid, StowedImpulses};
 #[cfg(doc)]
 use crate::systems::sleep::{fall_asleep, wake};
 
+/// The `on_remove` hook of [`Sleeping`]: the marble woke (by [`wake`] or by hand) or was
+/// despawned asleep. Noted for the next step's [`wake`] (its slow time starts again, its
+/// kept contact impulses go back to the solver) whenever that runs: a hook, unlike bevy's
+/// removal buffers, keeps it however many frames pass without a physics step.
+fn note_woken(
+    mut world: bevy_ecs::world::DeferredWorld,
+    context: bevy_ecs::lifecycle::HookContext,
+) {
+    if let Some(mut state) = world.get_resource_mut::<SleepState>() {
+        state.woke.push(context.entity);
+    }
+}
+
 /// The `on_remove` hook of [`Marble`](crate::components::Marble): a sleeping marble
 /// despawned, or made no longer a marble, is noted where it slept, so that the marbles
 /// resting on it wake at the next step.
@@ -86,6 +99,7 @@ pub(crate) fn note_removed_sleeper(
 /// it to wake the marble by hand.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "bevy", derive(bevy_reflect::Reflect), reflect(Component))]
+#[component(on_remove = note_woken)]
 pub struct Sleeping {
     /// Where the marble fell asleep: moved elsewhere, it wakes.
     pub(crate) position: Vec3,
@@ -149,6 +163,8 @@ pub struct SleepState {
     pub(crate) idle: bool,
     /// How many times a step has put marbles to sleep (wrapping).
     pub(crate) naps: u32,
+    /// Marbles whose `Sleeping` went since the last step ([`note_woken`]).
+    pub(crate) woke: Vec<Entity>,
 }
 
 impl SleepState {

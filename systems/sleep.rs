@@ -89,10 +89,7 @@ pub fn wake(
     mut commands: Commands,
     (config, tilt, cache): (Res<StepConfig>, Option<Res<GravityTilt>>, Res<BoardCache>),
     (mut state, mut solver): (ResMut<SleepState>, ResMut<PairSolver>),
-    (mut removed, quarantined): (
-        RemovedComponents<Sleeping>,
-        Query<&Sleeping, (With<Marble>, Added<Quarantined>)>,
-    ),
+    quarantined: Query<&Sleeping, (With<Marble>, Added<Quarantined>)>,
     mut sleepers: Query<
         (
             Entity,
@@ -140,7 +137,7 @@ pub fn wake(
     let state = state.as_mut();
     state.idle = false;
     state.keys.clear();
-    for entity in removed.read() {
+    for entity in state.woke.drain(..) {
         if let Ok((.., Some(mut drowsy))) = awake.get_mut(entity) {
             drowsy.0 = 0.0;
         }

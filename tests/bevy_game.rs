@@ -1307,3 +1307,40 @@ fn a_sleeping_marble_lifted_off_the_floor_ends_and_restarts_its_contact() {
         "landed"
     );
 }
+
+/// A marble woken by hand (its `Sleeping` removed by the game) stays awake for the sleep
+/// time before it can fall asleep again, also when the frames after the removal run no
+/// fixed step (four frames a step: removals older than two frames are gone from bevy's
+/// removal buffers by the next step).
+#[test]
+fn a_marble_woken_by_hand_stays_awake_for_the_sleep_time() {
+    let mut app = app(DT / 4.0);
+    let time = 0.25;
+    app.world_mut().resource_mut::<StepConfig>().sleep = Some(Sleep { speed: 0.01, time });
+    floor(&mut app, 0.0);
+    let marble = app
+        .world_mut()
+        .spawn((
+            Marble,
+            Restitution(0.0),
+            Transform::from_xyz(0.0, 0.008, 0.0),
+        ))
+        .id();
+    for _ in 0..256 {
+        app.update();
+    }
+    assert!(app.world().get::<Sleeping>(marble).is_some(), "asleep");
+    // Woken right after a fixed step, so that the next one comes three frames later.
+    let steps = |app: &App| app.world().resource::<Time<Fixed>>().elapsed_secs_f64();
+    let before = steps(&app);
+    while steps(&app) == before {
+        app.update();
+    }
+    app.world_mut().entity_mut(marble).remove::<Sleeping>();
+    let woken = steps(&app);
+    while app.world().get::<Sleeping>(marble).is_none() {
+        app.update();
+    }
+    let awake = steps(&app) - woken;
+    assert!(awake >= time as f64, "asleep again after {awake} s");
+}
