@@ -70,10 +70,13 @@ impl Drop for AtomicFile {
 
 /// Writes one CSV row per marble for the simulation's current state, labelled `step`.
 /// Numbers use Rust's shortest round-trip formatting, so they parse back to the same f32.
+/// A marble the program despawned has `NaN` for its state.
 pub fn write_csv_rows(w: &mut impl Write, sim: &Simulation, step: u64, dt: f32) -> io::Result<()> {
     let time = (step as f64 * dt as f64) as f32;
     for i in 0..sim.marbles().len() {
-        let (x, v) = sim.marble_world_state(i);
+        let (x, v) = sim
+            .try_marble_world_state(i)
+            .unwrap_or((glam::Vec3::NAN, glam::Vec3::NAN));
         let s = sim.marble_spin(i);
         writeln!(
             w,

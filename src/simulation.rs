@@ -281,10 +281,41 @@ impl Simulation {
     /// whose board-frame results this maps back to the world.
     pub fn marble_world_state(&self, index: usize) -> (Vec3, Vec3) {
         let (x, v) = self.marble_state(index);
+        self.to_world(x, v)
+    }
+
+    /// [`Self::marble_world_state`], `None` for a marble the program despawned (or took
+    /// the `Position` or `Velocity` of).
+    ///
+    /// # Panics
+    ///
+    /// If `index` is not one of the scene's marbles.
+    pub fn try_marble_world_state(&self, index: usize) -> Option<(Vec3, Vec3)> {
+        let (x, v) = self.try_marble_state(index)?;
+        Some(self.to_world(x, v))
+    }
+
+    /// A state in the still board's frame mapped to the world (the identity unless the
+    /// scene tilts gravity).
+    fn to_world(&self, x: Vec3, v: Vec3) -> (Vec3, Vec3) {
         match self.world.get_resource::<GravityTilt>() {
             Some(tilt) => tilt.to_world(x, v),
             None => (x, v),
         }
+    }
+
+    /// [`Self::marble_state`], `None` for a marble the program despawned (or took the
+    /// `Position` or `Velocity` of).
+    ///
+    /// # Panics
+    ///
+    /// If `index` is not one of the scene's marbles.
+    pub fn try_marble_state(&self, index: usize) -> Option<(Vec3, Vec3)> {
+        let e = self.marbles[index];
+        Some((
+            self.world.get::<Position>(e)?.0,
+            self.world.get::<Velocity>(e)?.0,
+        ))
     }
 
     /// Position and velocity of the scene's marble `index` (in the still board's frame when
@@ -293,7 +324,8 @@ impl Simulation {
     /// # Panics
     ///
     /// If `index` is not one of the scene's marbles, or the program despawned that marble
-    /// or removed its `Position` or `Velocity` (read the world for such a marble).
+    /// or removed its `Position` or `Velocity` ([`Self::try_marble_state`] for such a
+    /// marble).
     pub fn marble_state(&self, index: usize) -> (Vec3, Vec3) {
         let e = self.marbles[index];
         (

@@ -482,3 +482,45 @@ fn sensors_are_recorded_where_their_board_carries_them() {
     assert_eq!(f32s(&data["sensors"][0]["poses"]).len(), 7 * rec.frames());
     assert_eq!(f32s(&data["sensors"][0]["segments"]).len(), 12 * 6);
 }
+
+/// A recording goes on when the program despawns one of the scene's marbles (one that fell
+/// into a hole): from then on it is recorded as nowhere (not drawn), and the page is
+/// written; the other marble's frames are its free fall, exactly (velocity Verlet).
+#[test]
+fn a_despawned_marble_is_recorded_as_nowhere() {
+    let scene = Scene {
+        integrator: Integrator::VelocityVerlet,
+        dt: 1.0 / 60.0,
+        marbles: vec![
+            MarbleDesc::at([0.0, 2.0, 0.0]),
+            MarbleDesc::at([1.0, 2.0, 0.0]),
+        ],
+        ..Scene::default()
+    };
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let mut recorder = Recorder::new(&mut sim, 30, ReplayOptions::default());
+    for step in 1..=30u64 {
+        if step == 10 {
+            let gone = sim.marbles()[0];
+            sim.world_mut().despawn(gone);
+        }
+        sim.step();
+        recorder.after_step(&sim, step);
+    }
+    let mut csv = Vec::new();
+    bevy_marble::output::write_csv_rows(&mut csv, &sim, 30, scene.dt).unwrap();
+    let csv = String::from_utf8(csv).unwrap();
+    assert!(
+        csv.starts_with("30,0.5,0,NaN,NaN,NaN,NaN,NaN,NaN,"),
+        "{csv}"
+    );
+    let rec = recorder.finish("despawned");
+    let last = rec.frames() - 1;
+    assert!(rec.positions(0)[0].is_finite());
+    assert!(rec.positions(last)[0].is_nan());
+    let t = rec.time(last);
+    let want = 2.0 - 0.5 * 9.81 * t * t;
+    assert!((rec.positions(last)[1].y - want).abs() <= 1e-4);
+    let mut page = Vec::new();
+    rec.write_html(&mut page).unwrap();
+}

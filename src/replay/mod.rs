@@ -295,7 +295,11 @@ impl Recorder {
         let (mut fastest, mut sum, mut count) = (0.0f32, 0.0f64, 0usize);
         let stride = rec.marble_stride;
         for (k, i) in (0..sim.marbles().len()).step_by(stride).enumerate() {
-            let (x, v) = sim.marble_world_state(i);
+            // A marble the program despawned is recorded as nowhere (not drawn, not
+            // counted), as a quarantined one is.
+            let (x, v) = sim
+                .try_marble_world_state(i)
+                .unwrap_or((Vec3::NAN, Vec3::NAN));
             rec.positions.push(x);
             rec.velocities.push(v);
             let w = match tilt {
@@ -362,7 +366,9 @@ fn plane_extent(sim: &Simulation) -> f32 {
     let world = sim.world();
     let mut far = 0.0f32;
     for i in 0..sim.marbles().len() {
-        let x = sim.marble_state(i).0;
+        let Some((x, _)) = sim.try_marble_state(i) else {
+            continue;
+        };
         if x.is_finite() {
             far = far.max(x.x.abs()).max(x.z.abs());
         }
@@ -392,7 +398,9 @@ fn deepest_board(sim: &Simulation) -> f32 {
         .collect();
     let mut deepest = 0.0f32;
     for (i, &e) in sim.marbles().iter().enumerate() {
-        let x = sim.marble_state(i).0;
+        let Some((x, _)) = sim.try_marble_state(i) else {
+            continue;
+        };
         let r = world.get::<Radius>(e).map_or(0.0, |r| r.0);
         if !x.is_finite() {
             continue;
