@@ -116,6 +116,10 @@ pub struct EventState {
     pub(crate) unbounded: Vec<SensorVolume>,
     /// `(sensor, marble)` pairs crossed within this step (entered and left at once).
     pub(crate) crossed: Vec<(Entity, Entity)>,
+    /// Where the marbles were before this substep's impact and contact observers could run
+    /// (noted only while there are sensors and such observers): one moved since was sent
+    /// there by an observer.
+    pub(crate) noted: Vec<(Entity, Vec3)>,
     /// Which event types have observers, by [`Observed`] bit: only those are triggered
     /// (a pour's thousands of impacts per substep cost a message each, not an observer
     /// dispatch each).

@@ -112,11 +112,15 @@ pub fn substep_schedule() -> Schedule {
     let collisions = |c: Res<StepConfig>| c.marble_collisions;
     schedule.add_systems((
         (
-            validate::validate,
-            events::start_sensor_tracks.run_if(events::any_sensor),
+            (
+                validate::validate,
+                events::start_sensor_tracks.run_if(events::any_sensor),
+            )
+                .chain()
+                .run_if(sleep::first_substep),
+            events::catch_observer_moves.run_if(events::any_noted),
         )
             .chain()
-            .run_if(sleep::first_substep)
             .in_set(MarbleSystems::Validate),
         (
             boards::drive_boards.run_if(sleep::first_substep),
@@ -154,6 +158,7 @@ pub fn substep_schedule() -> Schedule {
             events::find_observers
                 .run_if(sleep::first_substep)
                 .run_if(events::watching),
+            events::note_positions.run_if(events::observers_may_move),
             events::record_touches.run_if(events::events_on),
         )
             .chain()
@@ -171,7 +176,11 @@ pub fn substep_schedule() -> Schedule {
         forces::clear_forces.in_set(MarbleSystems::Finish),
         (
             events::finish_touches.run_if(events::events_on),
-            (events::carry_sensors, events::update_sensors)
+            (
+                events::carry_sensors,
+                events::catch_observer_moves.run_if(events::any_noted),
+                events::update_sensors,
+            )
                 .chain()
                 .run_if(events::any_sensor),
         )

@@ -209,6 +209,45 @@ pub fn start_sensor_tracks(
     }
 }
 
+/// Run condition: there are sensors, and observers of impacts or contacts, which can move
+/// a marble during the step.
+pub fn observers_may_move(sensors: Query<(), With<Sensor>>, state: Res<EventState>) -> bool {
+    let movers = Observed::IMPACT | Observed::STARTED | Observed::ENDED;
+    state.observed & movers != 0 && !sensors.is_empty()
+}
+
+/// Before each substep's impact and contact observers can run: notes where every marble
+/// tracked for sensors is ([`catch_observer_moves`] compares).
+pub fn note_positions(
+    mut state: ResMut<EventState>,
+    marbles: Query<(Entity, &Position), (With<SensorTrack>, Without<Quarantined>)>,
+) {
+    state.noted.clear();
+    state.noted.extend(marbles.iter().map(|(e, p)| (e, p.0)));
+}
+
+/// Run condition: [`note_positions`] noted marbles not yet compared.
+pub fn any_noted(state: Res<EventState>) -> bool {
+    !state.noted.is_empty()
+}
+
+/// After the observers of the last substep's impacts (at the next substep's start, or
+/// before the sensors are checked) and of the step's contacts: a marble that is not where
+/// [`note_positions`] saw it was sent there by an observer (lava sending it back to the
+/// start); its [`SensorTrack`] starts over there, so that the jump crosses no sensor.
+pub fn catch_observer_moves(
+    mut state: ResMut<EventState>,
+    mut marbles: Query<(&Position, &mut SensorTrack)>,
+) {
+    for (entity, seen) in state.noted.drain(..) {
+        if let Ok((position, mut track)) = marbles.get_mut(entity)
+            && position.0 != seen
+        {
+            track.0 = position.0;
+        }
+    }
+}
+
 /// Places each sensor [`CarriedBy`] a board at the board's pose composed with its own.
 pub fn carry_sensors(
     mut sensors: Query<(&CarriedBy, &mut Position, &mut Rotation), (With<Sensor>, Without<Board>)>,

@@ -1344,3 +1344,64 @@ fn a_marble_woken_by_hand_stays_awake_for_the_sleep_time() {
     let awake = steps(&app) - woken;
     assert!(awake >= time as f64, "asleep again after {awake} s");
 }
+
+/// A marble sent back by an observer of its impact (lava), during the step, crosses no
+/// sensor on the way back, in the last substep or an earlier one: the goal between the
+/// lava and the start reports nothing.
+#[test]
+fn a_marble_sent_back_by_an_impact_observer_crosses_no_sensor() {
+    for substeps in [1, 3] {
+        let mut app = recording_app(DT);
+        {
+            let mut config = app.world_mut().resource_mut::<StepConfig>();
+            config.gravity = Vec3::ZERO;
+            config.substeps = substeps;
+        }
+        let lava = app
+            .world_mut()
+            .spawn((
+                Board,
+                Collider::cuboid(Vec3::new(0.05, 1.0, 1.0)).unwrap(),
+                Transform::from_xyz(1.0, 0.0, 0.0),
+            ))
+            .id();
+        app.world_mut().spawn((
+            Sensor,
+            Collider::cuboid(Vec3::splat(0.05)).unwrap(),
+            Transform::from_xyz(0.5, 0.0, 0.0),
+        ));
+        let marble = app
+            .world_mut()
+            .spawn((
+                Marble,
+                Transform::from_xyz(0.8, 0.0, 0.0),
+                Velocity(Vec3::new(2.0, 0.0, 0.0)),
+            ))
+            .id();
+        app.add_observer(
+            move |hit: On<MarbleImpact>, mut q: Query<(&mut Position, &mut Velocity)>| {
+                if hit.other == lava {
+                    let (mut x, mut v) = q.get_mut(hit.marble).unwrap();
+                    (x.0, v.0) = (Vec3::ZERO, Vec3::ZERO);
+                }
+            },
+        );
+        for _ in 0..16 {
+            app.update();
+        }
+        let seen = app.world().resource::<Seen>();
+        assert!(
+            !seen.impacts.is_empty(),
+            "{substeps} substeps: the lava is hit"
+        );
+        // (At the start, to the ulp of its old position that its carry may hold.)
+        let at = app.world().get::<Position>(marble).unwrap().0;
+        assert!(at.length() <= 1e-6, "{substeps} substeps: at {at}");
+        assert!(
+            seen.entered.is_empty() && seen.exited.is_empty(),
+            "{substeps} substeps: {:?} {:?}",
+            seen.entered,
+            seen.exited
+        );
+    }
+}
