@@ -77,8 +77,10 @@ pub struct Scene {
     pub solver_iterations: u32,
     /// Model the turning board by turning gravity instead (Neverball's way): the board
     /// stays still, gravity tilts back. Cheaper and approximate; see
-    /// [`GravityTilt`](crate::config::GravityTilt). Every turning board must share one
-    /// angular velocity and position. An extension of the contract.
+    /// [`GravityTilt`](crate::config::GravityTilt). Where a board turns, every board must
+    /// share its angular velocity and position (a board that does not turn cannot be
+    /// modelled: in the turning frame it would turn), and the sensors not carried by a
+    /// board turn with that frame too. An extension of the contract.
     #[serde(skip_serializing_if = "is_false")]
     pub tilt_as_gravity: bool,
     /// Collision-versus-contact threshold, m/s, ≥ 0.
@@ -458,24 +460,20 @@ impl Scene {
             non_negative(&f("rolling_resistance"), b.rolling_resistance)?;
             non_negative(&f("spin_damping"), b.spin_damping)?;
         }
-        if self.tilt_as_gravity {
-            let mut turning = self
-                .boards
-                .iter()
-                .enumerate()
-                .filter(|(_, b)| b.angular_velocity != [0.0; 3]);
-            if let Some((_, first)) = turning.next()
-                && let Some((i, other)) = turning.find(|(_, b)| {
-                    b.angular_velocity != first.angular_velocity || b.position != first.position
-                })
-            {
-                return invalid(
-                    &format!("boards[{i}].angular_velocity"),
-                    "the same angular velocity and position as the first turning board when \
-                     tilt_as_gravity is on",
-                    format!("{:?} about {:?}", other.angular_velocity, other.position),
-                );
-            }
+        // The engine models the turning board in its own frame, where every board stands
+        // still: a board that does not turn would turn with that frame.
+        if self.tilt_as_gravity
+            && let Some(first) = self.boards.iter().find(|b| b.angular_velocity != [0.0; 3])
+            && let Some((i, other)) = self.boards.iter().enumerate().find(|(_, b)| {
+                b.angular_velocity != first.angular_velocity || b.position != first.position
+            })
+        {
+            return invalid(
+                &format!("boards[{i}].angular_velocity"),
+                "the same angular velocity and position as the first turning board when \
+                 tilt_as_gravity is on (every board turns with it)",
+                format!("{:?} about {:?}", other.angular_velocity, other.position),
+            );
         }
         for (i, m) in self.marbles.iter().enumerate() {
             // A million marbles are checked without formatting a field name.

@@ -512,3 +512,24 @@ fn tilting_gravity_refuses_two_different_turns() {
         "{err}"
     );
 }
+
+/// `tilt_as_gravity` models every board in the turning board's frame: a board that does
+/// not turn beside one that does (a world floor below a tilting labyrinth) is refused,
+/// naming it, instead of turning with the frame.
+#[test]
+fn tilting_gravity_refuses_a_still_board_beside_a_turning_one() {
+    let err = Scene::from_ron_str(
+        "(tilt_as_gravity: true, boards: [(shape: Plane(()), angular_velocity: (0.0, 0.0, 0.1)), (shape: Plane(()), position: (0.0, -1.0, 0.0))])",
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string()
+            .starts_with("boards[1].angular_velocity must be"),
+        "{err}"
+    );
+    // Without a turning board, still boards are all there is: accepted.
+    Scene::from_ron_str(
+        "(tilt_as_gravity: true, boards: [(shape: Plane(())), (shape: Plane(()), position: (0.0, -1.0, 0.0))])",
+    )
+    .unwrap();
+}
