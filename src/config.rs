@@ -371,6 +371,11 @@ impl GravityTilt {
         let vw = self.rotation * v + self.angular_velocity.cross(xw - self.pivot);
         (xw, vw)
     }
+
+    /// A board-frame spin in the world: turned with the board, plus the board's own turn.
+    pub fn spin_to_world(&self, w: Vec3) -> Vec3 {
+        self.rotation * w + self.angular_velocity
+    }
 }
 
 /// The running substep: its length, which one of the step it is (0-based) and how many

@@ -77,7 +77,7 @@ pub fn write_csv_rows(w: &mut impl Write, sim: &Simulation, step: u64, dt: f32) 
         let (x, v) = sim
             .try_marble_world_state(i)
             .unwrap_or((glam::Vec3::NAN, glam::Vec3::NAN));
-        let s = sim.marble_spin(i);
+        let s = sim.marble_world_spin(i);
         writeln!(
             w,
             "{step},{time},{i},{},{},{},{},{},{},{},{},{}",

@@ -269,7 +269,22 @@ impl Simulation {
             .count()
     }
 
-    /// Angular velocity of the scene's marble `index` (zero when it does not spin).
+    /// [`Self::marble_spin`] in the world: the same unless the scene models its tilting
+    /// board by tilting gravity, whose board-frame spin this maps back to the world (as
+    /// [`Self::marble_world_state`] does the position and velocity) for a marble that
+    /// spins (zero for one that does not: its spin is not modelled).
+    pub fn marble_world_spin(&self, index: usize) -> Vec3 {
+        let Some(w) = self.world.get::<AngularVelocity>(self.marbles[index]) else {
+            return Vec3::ZERO;
+        };
+        match self.world.get_resource::<GravityTilt>() {
+            Some(tilt) => tilt.spin_to_world(w.0),
+            None => w.0,
+        }
+    }
+
+    /// Angular velocity of the scene's marble `index` (zero when it does not spin; in the
+    /// still board's frame when the scene tilts gravity instead of its board).
     pub fn marble_spin(&self, index: usize) -> Vec3 {
         self.world
             .get::<AngularVelocity>(self.marbles[index])

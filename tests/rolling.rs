@@ -533,3 +533,27 @@ fn tilting_gravity_refuses_a_still_board_beside_a_turning_one() {
     )
     .unwrap();
 }
+
+/// With `tilt_as_gravity`, the CSV's spin is in the world frame like its position and
+/// velocity: a marble at rest on the turning board turns with it, at the board's angular
+/// velocity exactly; a marble whose spin is not modelled (rolling off) reports none.
+#[test]
+fn tilting_gravity_reports_the_spin_in_the_world() {
+    for (rolling, want) in [(true, 0.1f32), (false, 0.0)] {
+        let scene = Scene::from_ron_str(&format!(
+            "(tilt_as_gravity: true, rolling: {rolling}, boards: [(shape: Cuboid(half_extents: (1.0, 0.05, 1.0)), angular_velocity: (0.1, 0.0, 0.0))], marbles: [(position: (0.0, 0.058, 0.5))])"
+        ))
+        .unwrap();
+        let sim = Simulation::from_scene(&scene).unwrap();
+        let mut csv = Vec::new();
+        bevy_marble::output::write_csv_rows(&mut csv, &sim, 0, scene.dt).unwrap();
+        let row = String::from_utf8(csv).unwrap();
+        let w: Vec<f32> = row
+            .trim()
+            .split(',')
+            .skip(9)
+            .map(|c| c.parse().unwrap())
+            .collect();
+        assert_eq!(w, [want, 0.0, 0.0], "rolling {rolling}: {row}");
+    }
+}
