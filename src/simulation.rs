@@ -342,10 +342,7 @@ impl Simulation {
     /// or removed its `Position` or `Velocity` ([`Self::try_marble_state`] for such a
     /// marble).
     pub fn marble_state(&self, index: usize) -> (Vec3, Vec3) {
-        let e = self.marbles[index];
-        (
-            self.world.get::<Position>(e).expect("a marble").0,
-            self.world.get::<Velocity>(e).expect("a marble").0,
-        )
+        self.try_marble_state(index)
+            .expect("a marble with a position and a velocity")
     }
 }

@@ -59,9 +59,9 @@ pub fn watching(
     config.events || plugin.is_some() || !sensors.is_empty()
 }
 
-/// Present in an app with the Bevy plugin's `MarbleEventsPlugin` (a resource): impacts and contacts are recorded whatever [`StepConfig::events`] says,
-/// so that a `StepConfig` the game inserts or builds afresh later (whose default leaves
-/// them off) keeps them.
+/// Present in an app with the Bevy plugin's `MarbleEventsPlugin` (a resource): impacts
+/// and contacts are recorded whatever [`StepConfig::events`] says, so that a `StepConfig`
+/// the game inserts or builds afresh later (whose default leaves them off) keeps them.
 #[derive(Resource, Default, Debug)]
 pub struct RecordEvents;
 
