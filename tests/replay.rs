@@ -524,3 +524,31 @@ fn a_despawned_marble_is_recorded_as_nowhere() {
     let mut page = Vec::new();
     rec.write_html(&mut page).unwrap();
 }
+
+/// A board the program despawns during a recording is recorded as nowhere from then on
+/// (not drawn), not left at the origin; the other board keeps its pose.
+#[test]
+fn a_despawned_board_is_recorded_as_nowhere() {
+    let mut scene = Scene::from_ron_str(
+        "(boards: [(shape: Plane(())), (shape: Cuboid(half_extents: (0.1, 0.1, 0.1)), position: (2.0, 0.5, 0.0))])",
+    )
+    .unwrap();
+    scene.dt = 1.0 / 60.0;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let mut recorder = Recorder::new(&mut sim, 20, ReplayOptions::default());
+    for step in 1..=20u64 {
+        if step == 10 {
+            let gone = sim.boards()[1];
+            sim.world_mut().despawn(gone);
+        }
+        sim.step();
+        recorder.after_step(&sim, step);
+    }
+    let rec = recorder.finish("despawned board");
+    let (first, last) = (&rec.boards[1].poses[0], rec.boards[1].poses.last().unwrap());
+    assert_eq!(first.0, Vec3::new(2.0, 0.5, 0.0));
+    assert!(last.0.is_nan() && last.1.is_nan(), "{last:?}");
+    assert_eq!(rec.boards[0].poses.last().unwrap().0, Vec3::ZERO);
+    let mut page = Vec::new();
+    rec.write_html(&mut page).unwrap();
+}

@@ -330,7 +330,13 @@ impl Recorder {
         let tracks = (rec.boards.iter_mut().zip(sim.boards()))
             .chain(rec.sensors.iter_mut().zip(sim.sensors()));
         for (track, &e) in tracks {
-            let p = world.get::<Position>(e).map_or(Vec3::ZERO, |p| p.0);
+            // One the program despawned is recorded as nowhere from then on (not drawn).
+            let Some(p) = world.get::<Position>(e).map(|p| p.0) else {
+                track
+                    .poses
+                    .push((Vec3::NAN, Quat::from_xyzw(f32::NAN, 0.0, 0.0, 0.0)));
+                continue;
+            };
             let q = world.get::<Rotation>(e).map_or(Quat::IDENTITY, |r| r.0);
             track.poses.push(match tilt {
                 Some(t) => (t.pivot + t.rotation * (p - t.pivot), t.rotation * q),
