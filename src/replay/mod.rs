@@ -303,7 +303,7 @@ impl Recorder {
             rec.positions.push(x);
             rec.velocities.push(v);
             let w = match tilt {
-                Some(t) => t.rotation * sim.marble_spin(i) + t.angular_velocity,
+                Some(t) => t.spin_to_world(sim.marble_spin(i)),
                 None => sim.marble_spin(i),
             };
             if !(x.is_finite() && v.is_finite() && w.is_finite()) {
